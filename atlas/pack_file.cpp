@@ -1,0 +1,247 @@
+#include "atlas/pack_file.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+
+namespace sa {
+namespace {
+
+uint64_t alignUp(uint64_t v) { return (v + kSectionAlign - 1) / kSectionAlign * kSectionAlign; }
+
+uint32_t crcOf(const uint8_t* p, uint64_t n) {
+  uLong c = crc32(0L, Z_NULL, 0);
+  while (n > 0) {
+    uInt take = static_cast<uInt>(std::min<uint64_t>(n, 1u << 30));
+    c = crc32(c, p, take);
+    p += take;
+    n -= take;
+  }
+  return static_cast<uint32_t>(c);
+}
+
+uint32_t crcOfFile(int fd, uint64_t off, uint64_t n) {
+  std::vector<uint8_t> buf(1 << 20);
+  uLong c = crc32(0L, Z_NULL, 0);
+  while (n > 0) {
+    size_t take = static_cast<size_t>(std::min<uint64_t>(n, buf.size()));
+    ssize_t r = ::pread(fd, buf.data(), take, static_cast<off_t>(off));
+    if (r <= 0) return 0;
+    c = crc32(c, buf.data(), static_cast<uInt>(r));
+    off += static_cast<uint64_t>(r);
+    n -= static_cast<uint64_t>(r);
+  }
+  return static_cast<uint32_t>(c);
+}
+
+SectionEntry makeSection(const char* id, uint64_t off, uint64_t size, uint32_t crc) {
+  SectionEntry e{};
+  std::memcpy(e.id, id, 4);
+  e.offset = off;
+  e.size = size;
+  e.crc = crc;
+  return e;
+}
+
+}  // namespace
+
+Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
+                        const std::string& note) {
+  meta_ = meta;
+  meta_.cellCount = static_cast<uint32_t>(cells.size());
+  cells_ = std::move(cells);
+  note_ = note;
+  const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageSize) * meta_.pageSize;
+  metaOff_ = kSectionAlign;
+  cellOff_ = alignUp(metaOff_ + sizeof(PackMeta));
+  hghtOff_ = alignUp(cellOff_ + cells_.size() * sizeof(CellRecord));
+  uint64_t end = hghtOff_ + pageTexels * meta_.pageCount * 2;
+  if (meta_.flags & kPackHasColor) {
+    colrOff_ = alignUp(end);
+    end = colrOff_ + pageTexels * meta_.pageCount * 4;
+  }
+  noteOff_ = alignUp(end);
+  fileSize_ = noteOff_ + note_.size();
+  SA_RETURN_IF_ERROR(file_.open(path));
+  // Sparse: untouched page texels read as 0 (= not covered).
+  if (ftruncate(file_.fd(), static_cast<off_t>(fileSize_)) != 0)
+    return Status::internal(file_.tempPath() + ": cannot size output file: " + std::strerror(errno));
+  return Status::ok();
+}
+
+Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* rgba) {
+  const CellRecord& c = cells_[cellIndex];
+  const uint32_t W = c.tileW, H = c.tileH, P = meta_.pageSize;
+  const uint64_t pageTexels = static_cast<uint64_t>(P) * P;
+  std::vector<uint16_t> row(W + 2);
+  std::vector<uint8_t> rowc(rgba ? (W + 2) * 4 : 0);
+  // Rows -1 .. H (gutter rows repeat the edge rows; gutter columns repeat the edge texels).
+  for (int64_t j = -1; j <= static_cast<int64_t>(H); ++j) {
+    const uint32_t sj = static_cast<uint32_t>(std::clamp<int64_t>(j, 0, H - 1));
+    for (uint32_t i = 0; i < W + 2; ++i) {
+      const uint32_t si = std::min(std::max(i, 1u) - 1, W - 1);
+      row[i] = heights[static_cast<size_t>(sj) * W + si];
+      if (rgba) std::memcpy(&rowc[i * 4], &rgba[(static_cast<size_t>(sj) * W + si) * 4], 4);
+    }
+    const uint64_t texel = pageTexels * c.page + static_cast<uint64_t>(c.tileY + j) * P + (c.tileX - 1);
+    SA_RETURN_IF_ERROR(file_.pwriteAll(row.data(), row.size() * 2, hghtOff_ + texel * 2));
+    if (rgba) SA_RETURN_IF_ERROR(file_.pwriteAll(rowc.data(), rowc.size(), colrOff_ + texel * 4));
+  }
+  return Status::ok();
+}
+
+Status PackWriter::finish() {
+  const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageSize) * meta_.pageSize;
+  SA_RETURN_IF_ERROR(file_.pwriteAll(&meta_, sizeof(meta_), metaOff_));
+  SA_RETURN_IF_ERROR(file_.pwriteAll(cells_.data(), cells_.size() * sizeof(CellRecord), cellOff_));
+  if (!note_.empty()) SA_RETURN_IF_ERROR(file_.pwriteAll(note_.data(), note_.size(), noteOff_));
+  std::vector<SectionEntry> sec;
+  sec.push_back(makeSection("META", metaOff_, sizeof(PackMeta),
+                            crcOf(reinterpret_cast<const uint8_t*>(&meta_), sizeof(meta_))));
+  sec.push_back(makeSection("CELL", cellOff_, cells_.size() * sizeof(CellRecord),
+                            crcOf(reinterpret_cast<const uint8_t*>(cells_.data()), cells_.size() * sizeof(CellRecord))));
+  const uint64_t hSize = pageTexels * meta_.pageCount * 2;
+  sec.push_back(makeSection("HGHT", hghtOff_, hSize, crcOfFile(file_.fd(), hghtOff_, hSize)));
+  if (meta_.flags & kPackHasColor) {
+    const uint64_t cSize = pageTexels * meta_.pageCount * 4;
+    sec.push_back(makeSection("COLR", colrOff_, cSize, crcOfFile(file_.fd(), colrOff_, cSize)));
+  }
+  sec.push_back(makeSection("NOTE", noteOff_, note_.size(),
+                            crcOf(reinterpret_cast<const uint8_t*>(note_.data()), note_.size())));
+  PackHeader h{};
+  std::memcpy(h.magic, kPackMagic, 8);
+  h.version = kPackVersion;
+  h.byteOrder = kByteOrderMark;
+  h.sectionCount = static_cast<uint32_t>(sec.size());
+  h.headerSize = sizeof(PackHeader);
+  h.fileSize = fileSize_;
+  h.sectionTableOffset = sizeof(PackHeader);
+  h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
+  SA_RETURN_IF_ERROR(file_.pwriteAll(&h, sizeof(h), 0));
+  SA_RETURN_IF_ERROR(file_.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h)));
+  return file_.commit();
+}
+
+PackReader::~PackReader() {
+  if (base_) munmap(const_cast<uint8_t*>(base_), size_);
+}
+
+const SectionEntry* PackReader::find(const char id[4]) const {
+  for (uint32_t i = 0; i < header_->sectionCount; ++i)
+    if (std::memcmp(sections_[i].id, id, 4) == 0) return &sections_[i];
+  return nullptr;
+}
+
+Status PackReader::open(const std::string& path) {
+  path_ = path;
+  int fd = ::open(path.c_str(), O_RDONLY);
+  if (fd < 0) return Status::badInput(path + ": cannot open: " + std::strerror(errno));
+  struct stat st;
+  if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return Status::badInput(path + ": not a regular file");
+  }
+  size_ = static_cast<uint64_t>(st.st_size);
+  if (size_ < sizeof(PackHeader)) {
+    ::close(fd);
+    return Status::badInput(path + ": too short to be a pack (" + std::to_string(size_) + " bytes)");
+  }
+  void* m = mmap(nullptr, size_, PROT_READ, MAP_SHARED, fd, 0);
+  ::close(fd);
+  if (m == MAP_FAILED) return Status::badInput(path + ": cannot map: " + std::strerror(errno));
+  base_ = static_cast<const uint8_t*>(m);
+  header_ = reinterpret_cast<const PackHeader*>(base_);
+  if (std::memcmp(header_->magic, kPackMagic, 8) != 0)
+    return Status::badInput(path + ": not a ScanAtlas pack (bad magic); packs are made by 'scanatlas pack'");
+  if (header_->byteOrder != kByteOrderMark)
+    return Status::badInput(path + ": byte-order mark mismatch (file written for another byte order)");
+  if (header_->version > kPackVersion)
+    return Status::badInput(path + ": pack format version " + std::to_string(header_->version) +
+                            " is newer than this program understands (version " + std::to_string(kPackVersion) +
+                            "); update scanatlas");
+  if (header_->version == 0) return Status::badInput(path + ": invalid pack format version 0");
+  if (header_->fileSize != size_)
+    return Status::badInput(path + ": file is " + std::to_string(size_) + " bytes but its header says " +
+                            std::to_string(header_->fileSize) + " (truncated or appended to)");
+  if (header_->sectionCount == 0 || header_->sectionCount > 64 ||
+      header_->sectionTableOffset < sizeof(PackHeader) ||
+      header_->sectionTableOffset + uint64_t(header_->sectionCount) * sizeof(SectionEntry) > size_)
+    return Status::badInput(path + ": corrupt section table");
+  sections_ = reinterpret_cast<const SectionEntry*>(base_ + header_->sectionTableOffset);
+  if (crcOf(reinterpret_cast<const uint8_t*>(sections_), header_->sectionCount * sizeof(SectionEntry)) !=
+      header_->sectionTableCrc)
+    return Status::badInput(path + ": section table checksum mismatch (file corrupt)");
+  for (uint32_t i = 0; i < header_->sectionCount; ++i) {
+    const SectionEntry& s = sections_[i];
+    if (s.offset > size_ || s.size > size_ - s.offset || s.offset % 8 != 0)
+      return Status::badInput(path + ": section " + std::string(s.id, 4) + " lies outside the file");
+  }
+  const SectionEntry* meta = find("META");
+  const SectionEntry* cell = find("CELL");
+  const SectionEntry* hght = find("HGHT");
+  if (!meta || !cell || !hght) return Status::badInput(path + ": missing a required section (META, CELL, HGHT)");
+  if (meta->size != sizeof(PackMeta)) return Status::badInput(path + ": META section has the wrong size");
+  if (crcOf(base_ + meta->offset, meta->size) != meta->crc)
+    return Status::badInput(path + ": META checksum mismatch (file corrupt)");
+  meta_ = reinterpret_cast<const PackMeta*>(base_ + meta->offset);
+  if (cell->size != uint64_t(meta_->cellCount) * sizeof(CellRecord))
+    return Status::badInput(path + ": CELL section size does not match the cell count");
+  if (crcOf(base_ + cell->offset, cell->size) != cell->crc)
+    return Status::badInput(path + ": CELL checksum mismatch (file corrupt)");
+  cells_ = reinterpret_cast<const CellRecord*>(base_ + cell->offset);
+  const uint32_t P = meta_->pageSize;
+  if (P == 0 || P > 65536 || (P & (P - 1)))
+    return Status::badInput(path + ": page size " + std::to_string(P) + " is not a power of two <= 65536");
+  const uint64_t pageTexels = uint64_t(P) * P;
+  if (hght->size != pageTexels * meta_->pageCount * 2)
+    return Status::badInput(path + ": HGHT section size does not match page size and count");
+  hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
+  if (meta_->flags & kPackHasColor) {
+    const SectionEntry* colr = find("COLR");
+    if (!colr || colr->size != pageTexels * meta_->pageCount * 4)
+      return Status::badInput(path + ": colour flag set but COLR section missing or of the wrong size");
+    colr_ = base_ + colr->offset;
+  }
+  for (uint32_t i = 0; i < meta_->cellCount; ++i) {
+    const CellRecord& c = cells_[i];
+    if (c.page >= meta_->pageCount || c.tileW == 0 || c.tileH == 0 || c.tileX < 1 || c.tileY < 1 ||
+        uint64_t(c.tileX) + c.tileW + 1 > P || uint64_t(c.tileY) + c.tileH + 1 > P)
+      return Status::badInput(path + ": cell " + std::to_string(i) + " has a tile outside its page");
+    for (double d : c.box)
+      if (!std::isfinite(d)) return Status::badInput(path + ": cell " + std::to_string(i) + " has a non-finite box");
+    if (!(c.box[1] >= c.box[0] && c.box[3] >= c.box[2] && c.box[5] >= c.box[4]))
+      return Status::badInput(path + ": cell " + std::to_string(i) + " has an inverted box");
+  }
+  return Status::ok();
+}
+
+Status PackReader::verifyPages() const {
+  for (uint32_t i = 0; i < header_->sectionCount; ++i) {
+    const SectionEntry& s = sections_[i];
+    if (crcOf(base_ + s.offset, s.size) != s.crc)
+      return Status::badInput(path_ + ": section " + std::string(s.id, 4) + " checksum mismatch (file corrupt)");
+  }
+  return Status::ok();
+}
+
+const uint16_t* PackReader::heightPage(uint32_t page) const {
+  return hght_ + uint64_t(page) * meta_->pageSize * meta_->pageSize;
+}
+
+const uint8_t* PackReader::colorPage(uint32_t page) const {
+  return colr_ ? colr_ + uint64_t(page) * meta_->pageSize * meta_->pageSize * 4 : nullptr;
+}
+
+std::string PackReader::note() const {
+  const SectionEntry* n = find("NOTE");
+  return n ? std::string(reinterpret_cast<const char*>(base_ + n->offset), n->size) : std::string();
+}
+
+}  // namespace sa

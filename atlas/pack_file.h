@@ -1,0 +1,83 @@
+// Writing and reading pack files (docs/FORMAT.md). The writer lays the file out up front
+// (the cell table and tile placements are known before any height map exists), then height
+// maps are written tile by tile with pwrite, so the atlas is never held in memory. The reader
+// maps the file; page sections are used in place.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "atlas/pack_format.h"
+#include "common/error.h"
+#include "common/fileio.h"
+
+namespace sa {
+
+class PackWriter {
+ public:
+  // `cells` must already carry their tile placements; `meta` the page size and count.
+  Status open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
+              const std::string& note);
+  // Writes one tile (tileW x tileH, row-major) and its gutter. `rgba` may be null when the
+  // pack has no colour. Thread-safe for different cells.
+  Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* rgba);
+  // Updates META (e.g. timings) before finish().
+  void setMeta(const PackMeta& meta) {
+    const uint32_t cells = meta_.cellCount;
+    meta_ = meta;
+    meta_.cellCount = cells;
+  }
+  // Computes checksums, writes header, META and CELL, fsyncs and renames into place.
+  Status finish();
+  const std::string& tempPath() const { return file_.tempPath(); }
+
+ private:
+  AtomicFile file_;
+  PackMeta meta_{};
+  std::vector<CellRecord> cells_;
+  std::string note_;
+  uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
+};
+
+class PackReader {
+ public:
+  PackReader() = default;
+  ~PackReader();
+  PackReader(const PackReader&) = delete;
+  PackReader& operator=(const PackReader&) = delete;
+
+  // Maps the file and runs the cheap checks: magic, version, sizes, every section inside
+  // the file, META and CELL checksums, cell tiles inside their pages.
+  Status open(const std::string& path);
+  // Checks the checksums of the large sections too (reads every byte).
+  Status verifyPages() const;
+
+  const std::string& path() const { return path_; }
+  const PackMeta& meta() const { return *meta_; }
+  std::span<const CellRecord> cells() const { return {cells_, meta_->cellCount}; }
+  const uint16_t* heightPage(uint32_t page) const;
+  const uint8_t* colorPage(uint32_t page) const;  // null when the pack has no colour
+  bool hasColor() const { return colr_ != nullptr; }
+  uint64_t fileBytes() const { return size_; }
+  std::string note() const;
+
+  // Height of cell c at texel (i, j) of its tile (0 = uncovered).
+  uint16_t texel(const CellRecord& c, int i, int j) const {
+    return heightPage(c.page)[(size_t)(c.tileY + j) * meta_->pageSize + (c.tileX + i)];
+  }
+
+ private:
+  const SectionEntry* find(const char id[4]) const;
+  std::string path_;
+  const uint8_t* base_ = nullptr;
+  uint64_t size_ = 0;
+  const PackHeader* header_ = nullptr;
+  const SectionEntry* sections_ = nullptr;
+  const PackMeta* meta_ = nullptr;
+  const CellRecord* cells_ = nullptr;
+  const uint16_t* hght_ = nullptr;
+  const uint8_t* colr_ = nullptr;
+};
+
+}  // namespace sa

@@ -1,0 +1,196 @@
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "cli/args.h"
+#include "cli/commands.h"
+#include "preprocess/pipeline.h"
+
+namespace sa {
+namespace {
+
+const char* kHelp =
+    "usage: scanatlas pack INPUT... -o OUT.hfa [options]\n"
+    "\n"
+    "Converts scans into a height-field atlas pack. Inputs: PLY files (ascii or binary, points\n"
+    "or meshes) and Stanford .conf scan sets (range scans aligned by their transforms). Memory\n"
+    "stays within --mem-budget whatever the input size (points go through on-disk chunks).\n"
+    "\n"
+    "options:\n"
+    "  -o, --output FILE      the pack to write (written atomically: FILE appears only when complete)\n"
+    "  --mem-budget SIZE      working memory for points in flight (default 1G; suffixes K, M, G)\n"
+    "  --texels N             texel budget over all height maps (default 64M)\n"
+    "  --texel-size X         texel size in input units (default: half the median sample spacing,\n"
+    "                         enlarged if the budget requires)\n"
+    "  --max-depth N          deepest octree level (default 10; the paper uses 6-10)\n"
+    "  --max-angle DEG        height-field test: largest angle between a normal and the cell's\n"
+    "                         plane normal (default 85; the paper's test is 90)\n"
+    "  --coverage R           texels farther than R sample spacings from every point stay empty,\n"
+    "                         so holes and scan edges stay open (default 1.5)\n"
+    "  --outliers F           fraction of a cell's points whose normal may fail the test (default\n"
+    "                         0.01: estimated normals are noisy; 0 is the paper's strict test)\n"
+    "  --min-split N          cells with fewer points are not split further (default 32)\n"
+    "  --neighbours K         neighbours for normal estimation when the input has none (default 24)\n"
+    "  --as-points            ignore mesh faces: build height maps from the vertices by pull-push\n"
+    "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
+    "  --json                 print the summary as JSON on stdout\n"
+    "  -q, --quiet            no progress and no summary\n";
+
+class Progress {
+ public:
+  explicit Progress(bool enabled) : enabled_(enabled), tty_(isatty(2)), start_(Clock::now()) {}
+  void operator()(const char* phase, uint64_t done, uint64_t total) {
+    if (!enabled_) return;
+    const auto now = Clock::now();
+    const bool phaseChanged = phase != phase_;
+    if (phaseChanged && !phase_.empty() && tty_) std::fputc('\n', stderr);
+    if (phaseChanged) {
+      phase_ = phase;
+      phaseStart_ = now;
+      if (!tty_) std::fprintf(stderr, "pack: %s...\n", phase);
+    }
+    if (!tty_) return;
+    if (!phaseChanged && done < total && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    const double secs = std::chrono::duration<double>(now - phaseStart_).count();
+    const double frac = total ? double(done) / double(total) : 1.0;
+    const int width = 30, filled = static_cast<int>(frac * width);
+    std::string bar(size_t(filled), '#');
+    bar.resize(width, '.');
+    const double rate = secs > 0 ? double(done) / secs / 1e6 : 0;
+    std::fprintf(stderr, "\r%-10s [%s] %5.1f%%  %.2fM/%.2fM pts  %.2f Mpts/s  %.1fs ", phase, bar.c_str(),
+                 100 * frac, done / 1e6, total / 1e6, rate, secs);
+    std::fflush(stderr);
+  }
+  void finish() {
+    if (enabled_ && tty_ && !phase_.empty()) std::fputc('\n', stderr);
+  }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  bool enabled_, tty_;
+  std::string phase_;
+  Clock::time_point start_, phaseStart_, last_;
+};
+
+}  // namespace
+
+int cmdPack(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv,
+                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
+                      "neighbours", "scratch", "outliers", "min-split"},
+                     {"as-points", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().empty()) return reportError(Status::badInput("pack: no input files (see --help)"));
+  if (!a.has("output")) return reportError(Status::badInput("pack: -o OUT.hfa is required"));
+  PackOptions opt;
+  if (a.has("mem-budget")) {
+    auto v = parseSize("mem-budget", a.get("mem-budget"));
+    if (!v) return reportError(v.status());
+    if (*v < (16u << 20)) return reportError(Status::badInput("--mem-budget: at least 16M is needed"));
+    opt.memBudget = *v;
+  }
+  if (a.has("texels")) {
+    auto v = parseSize("texels", a.get("texels"));
+    if (!v) return reportError(v.status());
+    if (*v < 1024 || *v > (uint64_t(1) << 34)) return reportError(Status::badInput("--texels: must be between 1K and 16G"));
+    opt.texelBudget = *v;
+  }
+  if (a.has("texel-size")) {
+    auto v = parseNumber("texel-size", a.get("texel-size"));
+    if (!v) return reportError(v.status());
+    if (*v <= 0) return reportError(Status::badInput("--texel-size must be positive"));
+    opt.texelSize = *v;
+  }
+  if (a.has("max-depth")) {
+    auto v = parseInt("max-depth", a.get("max-depth"), 0, 20);
+    if (!v) return reportError(v.status());
+    opt.octree.maxDepth = static_cast<int>(*v);
+  }
+  if (a.has("max-angle")) {
+    auto v = parseNumber("max-angle", a.get("max-angle"));
+    if (!v) return reportError(v.status());
+    if (*v <= 0 || *v > 90) return reportError(Status::badInput("--max-angle must be in (0, 90]"));
+    opt.octree.maxAngleDeg = *v;
+  }
+  if (a.has("coverage")) {
+    auto v = parseNumber("coverage", a.get("coverage"));
+    if (!v) return reportError(v.status());
+    if (*v <= 0 || *v > 100) return reportError(Status::badInput("--coverage must be in (0, 100]"));
+    opt.coverageRadius = *v;
+  }
+  if (a.has("outliers")) {
+    auto v = parseNumber("outliers", a.get("outliers"));
+    if (!v) return reportError(v.status());
+    if (*v < 0 || *v > 0.5) return reportError(Status::badInput("--outliers must be in [0, 0.5]"));
+    opt.octree.outlierFraction = *v;
+  }
+  if (a.has("min-split")) {
+    auto v = parseInt("min-split", a.get("min-split"), 1, 1 << 30);
+    if (!v) return reportError(v.status());
+    opt.octree.minSplitPoints = static_cast<uint32_t>(*v);
+  }
+  if (a.has("neighbours")) {
+    auto v = parseInt("neighbours", a.get("neighbours"), 3, 128);
+    if (!v) return reportError(v.status());
+    opt.normalNeighbours = static_cast<int>(*v);
+  }
+  opt.asPoints = a.flag("as-points");
+  opt.scratchParent = a.get("scratch");
+  for (int i = 0; i < argc; ++i) opt.commandLine += std::string(i ? " " : "") + argv[i];
+  const std::string out = a.get("output");
+  if (std::filesystem::is_directory(out)) return reportError(Status::badInput(out + ": is a directory; give a file name"));
+
+  auto input = InputSet::open(a.positionals());
+  if (!input) return reportError(input.status());
+  const bool quiet = a.flag("quiet");
+  for (const auto& w : input->warnings())
+    if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", w.c_str());
+  Progress progress(!quiet && !a.flag("json"));
+  PackSummary sum;
+  s = packInput(*input, out, opt, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
+  progress.finish();
+  if (!s) return reportError(s);
+  const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
+  if (a.flag("json")) {
+    std::printf("{\"output\": \"%s\", \"points\": %llu, \"skipped_points\": %llu, \"triangles\": %llu, \"cells\": %u, "
+                "\"forced_cells\": %u, \"degenerate_cells\": %u, \"chunks\": %u, \"pages\": %u, \"page_size\": %u, "
+                "\"texels\": %llu, \"texel_size\": %.9g, \"sample_spacing\": %.9g, \"bytes\": %llu, "
+                "\"bytes_per_point\": %.3f, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
+                "\"cells_per_level\": [",
+                jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
+                (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.chunks,
+                sum.pages, sum.pageSize, (unsigned long long)sum.texels, sum.texelSize, sum.spacing,
+                (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
+                sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
+                sum.hasColor ? "true" : "false");
+    for (size_t i = 0; i < sum.cellsPerLevel.size(); ++i) std::printf("%s%u", i ? ", " : "", sum.cellsPerLevel[i]);
+    std::printf("], \"seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
+                "\"write\": %.3f, \"total\": %.3f}, \"mpts_per_s\": %.3f}\n",
+                sum.seconds[0], sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], sum.seconds[5], mpts);
+  } else if (!quiet) {
+    std::fprintf(stderr,
+                 "packed %s: %llu points%s -> %u cells (%u forced), %u chunk(s)\n"
+                 "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %u^2, %s%s\n"
+                 "  file %.1f MiB (%.1f bytes/point)\n"
+                 "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n",
+                 out.c_str(), (unsigned long long)sum.pointsRead,
+                 sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
+                 sum.cells, sum.forcedCells, sum.chunks, (unsigned long long)sum.texels, sum.texelSize, sum.spacing,
+                 sum.pages, sum.pageSize, sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
+                 sum.normalsEstimated ? ", normals estimated" : "", sum.fileBytes / 1048576.0,
+                 double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.seconds[5], sum.seconds[0],
+                 sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts);
+  }
+  return 0;
+}
+
+}  // namespace sa

@@ -1,0 +1,174 @@
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+
+#include "atlas/pack_file.h"
+#include "cli/args.h"
+#include "cli/commands.h"
+#include "viewer/egl_context.h"
+#include "viewer/renderer.h"
+
+namespace sa {
+namespace {
+
+const char* kHelp =
+    "usage: scanatlas render PACK -o OUT.png [camera] [options]\n"
+    "\n"
+    "Renders a pack headless (EGL: a GPU when there is one, else Mesa llvmpipe) by ray-casting\n"
+    "every height field per pixel (Lu, Low & Zheng). Coordinates are the input's world\n"
+    "coordinates (after scan-set alignment).\n"
+    "\n"
+    "camera (one of):\n"
+    "  --orbit N              N views around the bounding box: OUT_0.png .. OUT_{N-1}.png\n"
+    "  --eye X,Y,Z --target X,Y,Z [--up X,Y,Z]   one view (default: looking at the centre)\n"
+    "  --fov DEG              vertical field of view (default 40)\n"
+    "  --up X,Y,Z             up direction, also the orbit axis (default 0,1,0)\n"
+    "  --size WxH             image size (default 1024x1024)\n"
+    "\n"
+    "options:\n"
+    "  -o, --output FILE      PNG to write\n"
+    "  --depth-out FILE.pfm   also write float32 linear view depth (distance along the camera's\n"
+    "                         forward axis, world units; inf where nothing was hit)\n"
+    "  --iterations N         linear ray-march steps per height field (default 12)\n"
+    "  --refine N             bisection steps after the linear search (default 6)\n"
+    "  --no-color             ignore scan colours\n"
+    "  --background R,G,B     background colour, 0..1 (default 0.1,0.1,0.12)\n"
+    "  --json                 print per-view frame times as JSON on stdout\n"
+    "  -q, --quiet            print nothing but errors\n";
+
+std::string indexed(const std::string& path, int i) {
+  std::filesystem::path p(path);
+  return (p.parent_path() / (p.stem().string() + "_" + std::to_string(i) + p.extension().string())).string();
+}
+
+}  // namespace
+
+int cmdRender(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv,
+                     {"output", "orbit", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
+                      "background"},
+                     {"no-color", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().size() != 1) return reportError(Status::badInput("render: give exactly one pack (see --help)"));
+  if (!a.has("output")) return reportError(Status::badInput("render: -o OUT.png is required"));
+  PackReader pack;
+  s = pack.open(a.positionals()[0]);
+  if (!s) return reportError(s);
+  const PackMeta& m = pack.meta();
+  const Eigen::Vector3d origin(m.origin[0], m.origin[1], m.origin[2]);
+  const Eigen::Vector3d bmin = origin + Eigen::Vector3d(m.boundsMin[0], m.boundsMin[1], m.boundsMin[2]);
+  const Eigen::Vector3d bmax = origin + Eigen::Vector3d(m.boundsMax[0], m.boundsMax[1], m.boundsMax[2]);
+
+  Camera base;
+  base.width = base.height = 1024;
+  if (a.has("size")) s = parseWxH("size", a.get("size"), base.width, base.height);
+  if (!s) return reportError(s);
+  if (a.has("fov")) {
+    auto v = parseNumber("fov", a.get("fov"));
+    if (!v) return reportError(v.status());
+    base.fovDeg = *v;
+  }
+  if (a.has("up")) {
+    auto v = parseVec3("up", a.get("up"));
+    if (!v) return reportError(v.status());
+    if (v->norm() == 0) return reportError(Status::badInput("--up must not be zero"));
+    base.up = v->normalized();
+  }
+  RenderSettings rs;
+  if (a.has("iterations")) {
+    auto v = parseInt("iterations", a.get("iterations"), 1, 1024);
+    if (!v) return reportError(v.status());
+    rs.iterations = static_cast<int>(*v);
+  }
+  if (a.has("refine")) {
+    auto v = parseInt("refine", a.get("refine"), 0, 64);
+    if (!v) return reportError(v.status());
+    rs.refineSteps = static_cast<int>(*v);
+  }
+  if (a.has("background")) {
+    auto v = parseVec3("background", a.get("background"));
+    if (!v) return reportError(v.status());
+    for (int i = 0; i < 3; ++i) rs.background[i] = float(std::clamp((*v)[i], 0.0, 1.0));
+  }
+  rs.useColor = !a.flag("no-color");
+
+  std::vector<Camera> cams;
+  if (a.has("orbit")) {
+    auto n = parseInt("orbit", a.get("orbit"), 1, 100000);
+    if (!n) return reportError(n.status());
+    if (a.has("eye")) return reportError(Status::badInput("render: use either --orbit or --eye, not both"));
+    cams = orbitCameras(bmin, bmax, static_cast<int>(*n), base.up, base.fovDeg, base.width, base.height);
+  } else {
+    Camera c = base;
+    c.target = (bmin + bmax) / 2;
+    if (a.has("target")) {
+      auto v = parseVec3("target", a.get("target"));
+      if (!v) return reportError(v.status());
+      c.target = *v;
+    }
+    if (a.has("eye")) {
+      auto v = parseVec3("eye", a.get("eye"));
+      if (!v) return reportError(v.status());
+      c.eye = *v;
+    } else {
+      c = orbitCameras(bmin, bmax, 1, base.up, base.fovDeg, base.width, base.height)[0];
+      if (a.has("target")) c.target = *parseVec3("target", a.get("target"));
+    }
+    s = c.validate();
+    if (!s) return reportError(s);
+    cams.push_back(c);
+  }
+  EglContext ctx;
+  s = ctx.init();
+  if (!s) return reportError(s);
+  Renderer renderer;
+  s = renderer.init(pack);
+  if (!s) return reportError(s);
+  const bool quiet = a.flag("quiet"), json = a.flag("json");
+  const bool many = cams.size() > 1;
+  std::vector<double> times;
+  if (json) std::printf("{\"renderer\": \"%s\", \"views\": [", jsonEscape(ctx.renderer()).c_str());
+  for (size_t i = 0; i < cams.size(); ++i) {
+    FrameResult fr;
+    s = renderer.render(cams[i], rs, fr, a.has("depth-out"));
+    if (!s) return reportError(s);
+    const std::string png = many ? indexed(a.get("output"), int(i)) : a.get("output");
+    s = writePng(png, fr.color);
+    if (!s) return reportError(s);
+    if (a.has("depth-out")) {
+      const std::string pfm = many ? indexed(a.get("depth-out"), int(i)) : a.get("depth-out");
+      s = writePfm(pfm, cams[i].width, cams[i].height, fr.depth);
+      if (!s) return reportError(s);
+    }
+    size_t hit = 0;
+    for (size_t k = 0; k < fr.color.rgba.size(); k += 4) {
+      const bool bg = fr.color.rgba[k] == uint8_t(rs.background[0] * 255 + 0.5f) &&
+                      fr.color.rgba[k + 1] == uint8_t(rs.background[1] * 255 + 0.5f) &&
+                      fr.color.rgba[k + 2] == uint8_t(rs.background[2] * 255 + 0.5f);
+      hit += !bg;
+    }
+    times.push_back(fr.milliseconds);
+    if (json) {
+      std::printf("%s{\"file\": \"%s\", \"ms\": %.3f, \"cells\": %u, \"width\": %d, \"height\": %d}", i ? ", " : "",
+                  jsonEscape(png).c_str(), fr.milliseconds, fr.cellsDrawn, cams[i].width, cams[i].height);
+    } else if (!quiet) {
+      std::fprintf(stderr, "%s: %dx%d, %u cells, %.1f ms\n", png.c_str(), cams[i].width, cams[i].height, fr.cellsDrawn,
+                   fr.milliseconds);
+    }
+  }
+  std::sort(times.begin(), times.end());
+  if (json) {
+    std::printf("], \"median_ms\": %.3f}\n", times[times.size() / 2]);
+  } else if (!quiet) {
+    std::fprintf(stderr, "renderer: %s; median frame %.1f ms over %zu view(s)\n", ctx.renderer().c_str(),
+                 times[times.size() / 2], times.size());
+  }
+  return 0;
+}
+
+}  // namespace sa

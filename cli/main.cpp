@@ -1,0 +1,70 @@
+// scanatlas: the single binary. Subcommands live in cmd_*.cpp; only cli/ prints and picks
+// exit codes (0 ok, 2 bad input or usage, 1 internal failure).
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "cli/commands.h"
+
+namespace {
+
+const char* kUsage =
+    "scanatlas — pack huge range scans into height-field atlases and ray-cast them per pixel\n"
+    "\n"
+    "usage: scanatlas <command> [options]\n"
+    "\n"
+    "commands:\n"
+    "  pack    convert scans (PLY, Stanford .conf scan sets) into a pack file (.hfa)\n"
+    "  render  render views of a pack headless to PNG (and depth to PFM)\n"
+    "  info    describe a pack: cells, levels, texels, bytes, bounds, timings\n"
+    "\n"
+    "Run 'scanatlas <command> --help' for a command's options.\n";
+
+}  // namespace
+
+namespace sa {
+
+int reportError(const Status& s) {
+  std::fprintf(stderr, "scanatlas: error: %s\n", s.message().c_str());
+  return s.kind() == ErrorKind::kBadInput ? 2 : 1;
+}
+
+std::string jsonEscape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '"': o += "\\\""; break;
+      case '\\': o += "\\\\"; break;
+      case '\n': o += "\\n"; break;
+      case '\t': o += "\\t"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          char b[8];
+          std::snprintf(b, sizeof(b), "\\u%04x", c);
+          o += b;
+        } else {
+          o += c;
+        }
+    }
+  }
+  return o;
+}
+
+}  // namespace sa
+
+int main(int argc, char** argv) {
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") || !std::strcmp(argv[1], "help")) {
+    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  if (!std::strcmp(argv[1], "--version")) {
+    std::puts("scanatlas 0.1.0 (pack format 1)");
+    return 0;
+  }
+  const std::string cmd = argv[1];
+  if (cmd == "pack") return sa::cmdPack(argc - 2, argv + 2);
+  if (cmd == "render") return sa::cmdRender(argc - 2, argv + 2);
+  if (cmd == "info") return sa::cmdInfo(argc - 2, argv + 2);
+  std::fprintf(stderr, "scanatlas: unknown command '%s'\n\n%s", cmd.c_str(), kUsage);
+  return 2;
+}

@@ -1,0 +1,11 @@
+# Writes OUT: a C++ file defining sa::embeddedShader(name) over every file in FILES.
+separate_arguments(FILES)
+set(body "#include <cstring>\n#include <string_view>\nnamespace sa {\nnamespace {\nstruct Entry { const char* name; const char* text; };\nconst Entry kShaders[] = {\n")
+foreach(f ${FILES})
+  get_filename_component(name ${f} NAME)
+  file(READ ${f} text)
+  set(body "${body}  {\"${name}\", R\"SAEMBED(${text})SAEMBED\"},\n")
+endforeach()
+set(body "${body}};\n}  // namespace\nconst char* embeddedShader(std::string_view name) {\n  for (const Entry& e : kShaders) if (name == e.name) return e.text;\n  return nullptr;\n}\n}  // namespace sa\n")
+file(WRITE ${OUT}.tmp "${body}")
+file(RENAME ${OUT}.tmp ${OUT})

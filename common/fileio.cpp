@@ -1,0 +1,165 @@
+#include "common/fileio.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+namespace sa {
+
+BufferedReader::~BufferedReader() {
+  if (f_) std::fclose(f_);
+}
+
+Status BufferedReader::open(const std::string& path, size_t bufferBytes) {
+  path_ = path;
+  f_ = std::fopen(path.c_str(), "rb");
+  if (!f_) return Status::badInput(path + ": cannot open: " + std::strerror(errno));
+  struct stat st;
+  if (fstat(fileno(f_), &st) != 0 || !S_ISREG(st.st_mode))
+    return Status::badInput(path + ": not a regular file");
+  fileSize_ = static_cast<uint64_t>(st.st_size);
+  buf_.resize(bufferBytes);
+  return Status::ok();
+}
+
+bool BufferedReader::refill() {
+  bufferStart_ += len_;
+  pos_ = 0;
+  len_ = std::fread(buf_.data(), 1, buf_.size(), f_);
+  return len_ > 0;
+}
+
+bool BufferedReader::read(void* dst, size_t n) {
+  char* out = static_cast<char*>(dst);
+  while (n > 0) {
+    if (pos_ == len_ && !refill()) return false;
+    size_t take = std::min(n, len_ - pos_);
+    std::memcpy(out, buf_.data() + pos_, take);
+    pos_ += take;
+    out += take;
+    n -= take;
+  }
+  return true;
+}
+
+bool BufferedReader::skip(uint64_t n) {
+  uint64_t inBuf = len_ - pos_;
+  if (n <= inBuf) {
+    pos_ += n;
+    return true;
+  }
+  uint64_t target = offset() + n;
+  if (target > fileSize_) return false;
+  if (fseeko(f_, static_cast<off_t>(target), SEEK_SET) != 0) return false;
+  bufferStart_ = target;
+  pos_ = len_ = 0;
+  return true;
+}
+
+bool BufferedReader::readLine(std::string& line, size_t maxLen) {
+  line.clear();
+  int c = get();
+  if (c < 0) return false;
+  while (c >= 0 && c != '\n') {
+    if (line.size() < maxLen) line.push_back(static_cast<char>(c));
+    c = get();
+  }
+  if (!line.empty() && line.back() == '\r') line.pop_back();
+  return true;
+}
+
+AtomicFile::~AtomicFile() { abandon(); }
+
+Status AtomicFile::open(const std::string& path) {
+  path_ = path;
+  std::string tmpl = path + ".tmp-XXXXXX";
+  std::vector<char> buf(tmpl.begin(), tmpl.end());
+  buf.push_back('\0');
+  fd_ = mkstemp(buf.data());
+  if (fd_ < 0) return Status::badInput(path + ": cannot create output file: " + std::strerror(errno));
+  tmp_ = buf.data();
+  return Status::ok();
+}
+
+Status AtomicFile::pwriteAll(const void* data, size_t n, uint64_t offset) {
+  const char* p = static_cast<const char*>(data);
+  while (n > 0) {
+    ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(offset));
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      return Status::internal(tmp_ + ": write failed: " + std::strerror(errno));
+    }
+    p += w;
+    n -= static_cast<size_t>(w);
+    offset += static_cast<uint64_t>(w);
+  }
+  return Status::ok();
+}
+
+Status AtomicFile::commit() {
+  if (fd_ < 0) return Status::internal(path_ + ": commit without open file");
+  if (fsync(fd_) != 0) return Status::internal(tmp_ + ": fsync failed: " + std::strerror(errno));
+  fchmod(fd_, 0644);
+  ::close(fd_);
+  fd_ = -1;
+  if (std::rename(tmp_.c_str(), path_.c_str()) != 0) {
+    std::string err = std::strerror(errno);
+    ::unlink(tmp_.c_str());
+    return Status::internal(path_ + ": cannot rename temporary file into place: " + err);
+  }
+  tmp_.clear();
+  return Status::ok();
+}
+
+void AtomicFile::abandon() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (!tmp_.empty()) ::unlink(tmp_.c_str());
+  tmp_.clear();
+}
+
+ScratchDir::~ScratchDir() {
+  if (!path_.empty()) {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+}
+
+Status ScratchDir::create(const std::string& parent, const std::string& prefix) {
+  std::string tmpl = joinPath(parent, prefix + "XXXXXX");
+  std::vector<char> buf(tmpl.begin(), tmpl.end());
+  buf.push_back('\0');
+  if (!mkdtemp(buf.data()))
+    return Status::badInput(parent + ": cannot create scratch directory: " + std::strerror(errno));
+  path_ = buf.data();
+  return Status::ok();
+}
+
+std::string directoryOf(const std::string& path) {
+  std::filesystem::path p(path);
+  auto parent = p.parent_path();
+  return parent.empty() ? std::string(".") : parent.string();
+}
+
+std::string joinPath(const std::string& dir, const std::string& name) {
+  return (std::filesystem::path(dir) / name).string();
+}
+
+Status writeFileAtomic(const std::string& path, const void* data, size_t n) {
+  AtomicFile f;
+  SA_RETURN_IF_ERROR(f.open(path));
+  SA_RETURN_IF_ERROR(f.pwriteAll(data, n, 0));
+  return f.commit();
+}
+
+Result<uint64_t> fileSize(const std::string& path) {
+  struct stat st;
+  if (stat(path.c_str(), &st) != 0) return Status::badInput(path + ": " + std::strerror(errno));
+  return static_cast<uint64_t>(st.st_size);
+}
+
+}  // namespace sa

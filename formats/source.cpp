@@ -1,0 +1,137 @@
+#include "formats/source.h"
+
+#include <algorithm>
+#include <filesystem>
+
+#include "formats/conf.h"
+#include "formats/ply.h"
+
+namespace sa {
+namespace {
+
+std::string lowerExtension(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e;
+}
+
+Status addPly(const std::string& path, std::vector<InputFile>& out, std::vector<std::string>& warnings) {
+  Result<PlyHeader> h = readPlyHeader(path);
+  if (!h) return h.status();
+  InputFile f;
+  f.path = path;
+  f.points = h->vertexCount;
+  f.hasNormals = h->hasNormals;
+  f.hasColors = h->hasColors;
+  f.hasFaces = h->hasFaces;
+  for (auto& w : h->warnings) warnings.push_back(w);
+  out.push_back(f);
+  return Status::ok();
+}
+
+// Adapts one file's batches: alignment transform, scan index, attribute harmonisation.
+class FileAdapter : public BatchSink {
+ public:
+  FileAdapter(BatchSink& next, const InputFile& f, bool keepNormals, bool wantColors, uint64_t base)
+      : next_(next), f_(f), keepNormals_(keepNormals), wantColors_(wantColors), base_(base) {}
+  Status onPoints(const PointBatch& in) override {
+    const bool touch = f_.transformed || (!keepNormals_ && in.hasNormals()) ||
+                       (wantColors_ && !in.hasColors()) || f_.scanIndex >= 0 || base_ != 0;
+    if (!touch) return next_.onPoints(in);
+    out_ = in;
+    out_.firstIndex = in.firstIndex + base_;
+    const size_t n = in.size();
+    if (f_.transformed) {
+      for (size_t i = 0; i < n; ++i) {
+        Eigen::Vector3d p = f_.rotation * Eigen::Vector3d(in.x[i], in.y[i], in.z[i]) + f_.translation;
+        out_.x[i] = p.x(); out_.y[i] = p.y(); out_.z[i] = p.z();
+        if (keepNormals_ && in.hasNormals()) {
+          Eigen::Vector3d nn = f_.rotation * Eigen::Vector3d(in.nx[i], in.ny[i], in.nz[i]);
+          out_.nx[i] = float(nn.x()); out_.ny[i] = float(nn.y()); out_.nz[i] = float(nn.z());
+        }
+      }
+    }
+    if (!keepNormals_) { out_.nx.clear(); out_.ny.clear(); out_.nz.clear(); }
+    if (wantColors_ && !in.hasColors()) { out_.r.assign(n, 255); out_.g.assign(n, 255); out_.b.assign(n, 255); }
+    if (f_.scanIndex >= 0) out_.scan.assign(n, static_cast<uint16_t>(f_.scanIndex));
+    return next_.onPoints(out_);
+  }
+  Status onTriangles(const uint32_t* idx, size_t n) override { return next_.onTriangles(idx, n); }
+
+ private:
+  BatchSink& next_;
+  const InputFile& f_;
+  bool keepNormals_, wantColors_;
+  uint64_t base_;
+  PointBatch out_;
+};
+
+}  // namespace
+
+Result<InputSet> InputSet::open(const std::vector<std::string>& paths) {
+  InputSet set;
+  if (paths.empty()) return Status::badInput("no input files given");
+  for (const auto& path : paths) {
+    const std::string ext = lowerExtension(path);
+    if (ext == ".conf") {
+      auto scans = readConf(path);
+      if (!scans) return scans.status();
+      for (const auto& s : *scans) {
+        SA_RETURN_IF_ERROR(addPly(s.path, set.files_, set.warnings_));
+        InputFile& f = set.files_.back();
+        f.transformed = true;
+        f.rotation = s.rotation;
+        f.translation = s.translation;
+        f.scanIndex = static_cast<int>(set.towardScanner_.size());
+        f.hasFaces = false;  // range grids are not triangles
+        set.towardScanner_.push_back(s.towardScanner);
+      }
+    } else if (ext == ".ply") {
+      SA_RETURN_IF_ERROR(addPly(path, set.files_, set.warnings_));
+    } else {
+      return Status::badInput(path + ": unsupported input format '" + ext +
+                              "' (supported: .ply, .conf scan sets)");
+    }
+  }
+  if (set.files_.size() > 1) {
+    for (auto& f : set.files_) {
+      if (f.hasFaces) {
+        set.warnings_.push_back(f.path + ": faces ignored (several inputs are packed as points)");
+        f.hasFaces = false;
+      }
+    }
+  }
+  if (set.pointCount() == 0) return Status::badInput(paths[0] + ": the input holds no points");
+  return set;
+}
+
+uint64_t InputSet::pointCount() const {
+  uint64_t n = 0;
+  for (const auto& f : files_) n += f.points;
+  return n;
+}
+
+bool InputSet::allHaveNormals() const {
+  return std::all_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasNormals; });
+}
+
+bool InputSet::anyHasColors() const {
+  return std::any_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasColors; });
+}
+
+Status InputSet::stream(BatchSink& sink, bool readTriangles, size_t batchPoints) const {
+  const bool keepNormals = allHaveNormals();
+  const bool wantColors = anyHasColors();
+  uint64_t base = 0;
+  for (const auto& f : files_) {
+    FileAdapter adapter(sink, f, keepNormals, wantColors, base);
+    PlyReadOptions opt;
+    opt.batchPoints = batchPoints;
+    opt.readFaces = readTriangles && hasTriangles();
+    SA_RETURN_IF_ERROR(readPly(f.path, opt, adapter));
+    base += f.points;
+  }
+  return Status::ok();
+}
+
+}  // namespace sa

@@ -1,0 +1,48 @@
+// One entry point for every input a user names: PLY files and Stanford .conf scan sets,
+// several at once. Headers are read up front (cheap, validated); stream() delivers batches.
+#pragma once
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "formats/points.h"
+
+namespace sa {
+
+struct InputFile {
+  std::string path;
+  uint64_t points = 0;
+  bool hasNormals = false, hasColors = false, hasFaces = false;
+  bool transformed = false;     // member of a scan set
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  int scanIndex = -1;           // index into InputSet::towardScanner, or -1
+};
+
+class InputSet {
+ public:
+  static Result<InputSet> open(const std::vector<std::string>& paths);
+
+  const std::vector<InputFile>& files() const { return files_; }
+  uint64_t pointCount() const;
+  bool allHaveNormals() const;
+  bool anyHasColors() const;
+  // Triangles are used when the input is exactly one file with faces.
+  bool hasTriangles() const { return files_.size() == 1 && files_[0].hasFaces; }
+  // Per scan: direction from the surface toward the scanner (aligned coordinates).
+  const std::vector<Eigen::Vector3d>& towardScanner() const { return towardScanner_; }
+  const std::vector<std::string>& warnings() const { return warnings_; }
+
+  // Streams every file in order. Point batches carry aligned positions, the scan index when
+  // the input is a scan set, normals only when every file has them, and colours when any
+  // file has them (white elsewhere). Triangles only when hasTriangles() and readTriangles.
+  Status stream(BatchSink& sink, bool readTriangles, size_t batchPoints = kDefaultBatchPoints) const;
+
+ private:
+  std::vector<InputFile> files_;
+  std::vector<Eigen::Vector3d> towardScanner_;
+  std::vector<std::string> warnings_;
+};
+
+}  // namespace sa

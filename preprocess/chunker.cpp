@@ -1,0 +1,259 @@
+#include "preprocess/chunker.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+
+#include <Eigen/Geometry>
+
+#include "common/fileio.h"
+
+namespace sa {
+namespace {
+
+bool finite3(double x, double y, double z) { return std::isfinite(x) && std::isfinite(y) && std::isfinite(z); }
+
+class BoundsSink : public BatchSink {
+ public:
+  BoundsSink(BoundsInfo& out, const ProgressFn& p, uint64_t total) : out_(out), progress_(p), total_(total) {}
+  Status onPoints(const PointBatch& b) override {
+    for (size_t i = 0; i < b.size(); ++i) {
+      if (!finite3(b.x[i], b.y[i], b.z[i])) { ++out_.skipped; continue; }
+      Eigen::Vector3d p(b.x[i], b.y[i], b.z[i]);
+      out_.min = out_.min.cwiseMin(p);
+      out_.max = out_.max.cwiseMax(p);
+      sum_ += p - (out_.count == 0 ? (ref_ = p) : ref_);  // shifted sum: no cancellation
+      ++out_.count;
+    }
+    seen_ += b.size();
+    if (progress_) progress_("count", seen_, total_);
+    return Status::ok();
+  }
+  Eigen::Vector3d centroid() const { return out_.count ? ref_ + sum_ / double(out_.count) : ref_; }
+
+ private:
+  BoundsInfo& out_;
+  const ProgressFn& progress_;
+  uint64_t total_, seen_ = 0;
+  Eigen::Vector3d sum_ = Eigen::Vector3d::Zero(), ref_ = Eigen::Vector3d::Zero();
+};
+
+// Buffers records per chunk node and appends them to the node's file when full.
+class ChunkFiles {
+ public:
+  ChunkFiles(const std::string& dir, int level) : dir_(dir), level_(level) {}
+  std::string pathOf(uint64_t key) const {
+    return joinPath(dir_, "chunk_L" + std::to_string(level_) + "_" + std::to_string(key) + ".bin");
+  }
+  Status add(uint64_t key, const ChunkPoint& p) {
+    Node& n = nodes_[key];
+    n.buf.push_back(p);
+    ++n.count;
+    if (n.buf.size() >= kFlush) return flush(key, n);
+    return Status::ok();
+  }
+  Status flushAll() {
+    for (auto& [k, n] : nodes_) SA_RETURN_IF_ERROR(flush(k, n));
+    return Status::ok();
+  }
+  template <class F>
+  void forEach(F f) const {
+    for (const auto& [k, n] : nodes_) f(k, n.count);
+  }
+
+ private:
+  static constexpr size_t kFlush = 8192;  // 288 KiB per open node
+  struct Node { std::vector<ChunkPoint> buf; uint64_t count = 0; };
+  Status flush(uint64_t key, Node& n) {
+    if (n.buf.empty()) return Status::ok();
+    std::string path = pathOf(key);
+    std::FILE* f = std::fopen(path.c_str(), "ab");
+    if (!f) return Status::internal(path + ": cannot write chunk file: " + std::strerror(errno));
+    size_t w = std::fwrite(n.buf.data(), sizeof(ChunkPoint), n.buf.size(), f);
+    bool ok = std::fclose(f) == 0 && w == n.buf.size();
+    if (!ok) return Status::internal(path + ": short write (disk full?)");
+    n.buf.clear();
+    n.buf.shrink_to_fit();
+    return Status::ok();
+  }
+  std::string dir_;
+  int level_;
+  std::map<uint64_t, Node> nodes_;
+};
+
+uint64_t keyOf(uint32_t ix, uint32_t iy, uint32_t iz, int level) {
+  return (uint64_t(ix) << (2 * level)) | (uint64_t(iy) << level) | uint64_t(iz);
+}
+
+class DistributeSink : public BatchSink {
+ public:
+  DistributeSink(const Quantizer& qz, const DistributeOptions& opt, ChunkFiles& files, int level,
+                 DistributeResult& out, const ProgressFn& p, uint64_t total)
+      : qz_(qz), opt_(opt), files_(files), level_(level), out_(out), progress_(p), total_(total) {
+    if (opt_.keepTriangles) {
+      out_.trianglePath = joinPath(opt_.scratchDir, "triangles.bin");
+      tri_ = std::fopen(out_.trianglePath.c_str(), "wb");
+    }
+  }
+  ~DistributeSink() override {
+    if (tri_) std::fclose(tri_);
+  }
+  Status onPoints(const PointBatch& b) override {
+    const int shift = 32 - level_;
+    for (size_t i = 0; i < b.size(); ++i) {
+      if (!finite3(b.x[i], b.y[i], b.z[i])) continue;
+      ChunkPoint p{};
+      const double rel[3] = {b.x[i] - opt_.origin.x(), b.y[i] - opt_.origin.y(), b.z[i] - opt_.origin.z()};
+      for (int a = 0; a < 3; ++a) p.q[a] = qz_.encode(rel[a], a);
+      if (b.hasNormals()) {
+        p.n[0] = b.nx[i]; p.n[1] = b.ny[i]; p.n[2] = b.nz[i];
+        p.flags |= 1;
+      }
+      if (b.hasColors()) { p.rgb[0] = b.r[i]; p.rgb[1] = b.g[i]; p.rgb[2] = b.b[i]; }
+      p.scan = b.scan.empty() ? 0 : b.scan[i];
+      p.vid = static_cast<uint32_t>(b.firstIndex + i);
+      if (opt_.keepTriangles) {
+        if (out_.vertexPos.size() < 3 * (size_t(p.vid) + 1)) {
+          out_.vertexPos.resize(3 * (size_t(p.vid) + 1), 0.0);
+        }
+        for (int a = 0; a < 3; ++a) out_.vertexPos[3 * size_t(p.vid) + a] = rel[a];
+      }
+      const uint32_t ix = level_ ? p.q[0] >> shift : 0, iy = level_ ? p.q[1] >> shift : 0,
+                     iz = level_ ? p.q[2] >> shift : 0;
+      SA_RETURN_IF_ERROR(files_.add(keyOf(ix, iy, iz, level_), p));
+    }
+    seen_ += b.size();
+    if (progress_) progress_("distribute", seen_, total_);
+    return Status::ok();
+  }
+  Status onTriangles(const uint32_t* idx, size_t n) override {
+    if (!tri_) return Status::ok();
+    out_.triangles += n;
+    if (std::fwrite(idx, 12, n, tri_) != n) return Status::internal(out_.trianglePath + ": short write");
+    // Area-weighted vertex normals (the cross product's length is twice the area).
+    if (out_.vertexNormal.size() < out_.vertexPos.size()) out_.vertexNormal.resize(out_.vertexPos.size(), 0.f);
+    const auto& P = out_.vertexPos;
+    for (size_t t = 0; t < n; ++t) {
+      const uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+      if (3 * size_t(std::max({a, b, c})) + 2 >= P.size()) continue;
+      Eigen::Vector3d pa(&P[3 * a]), pb(&P[3 * b]), pc(&P[3 * c]);
+      Eigen::Vector3d nn = (pb - pa).cross(pc - pa);
+      for (uint32_t v : {a, b, c})
+        for (int k = 0; k < 3; ++k) out_.vertexNormal[3 * size_t(v) + k] += float(nn[k]);
+    }
+    return Status::ok();
+  }
+
+ private:
+  const Quantizer& qz_;
+  const DistributeOptions& opt_;
+  ChunkFiles& files_;
+  int level_;
+  DistributeResult& out_;
+  const ProgressFn& progress_;
+  uint64_t total_, seen_ = 0;
+  std::FILE* tri_ = nullptr;
+};
+
+// Streams an over-full chunk file into its eight children.
+Status splitChunk(const ChunkInfo& c, const std::string& dir, std::vector<ChunkInfo>& children) {
+  const int level = c.level + 1;
+  ChunkFiles files(dir, level);
+  std::FILE* f = std::fopen(c.path.c_str(), "rb");
+  if (!f) return Status::internal(c.path + ": cannot reopen chunk file");
+  std::vector<ChunkPoint> buf(1 << 15);
+  const int shift = 32 - level;
+  Status st;
+  size_t n;
+  while (st.isOk() && (n = std::fread(buf.data(), sizeof(ChunkPoint), buf.size(), f)) > 0) {
+    for (size_t i = 0; i < n && st.isOk(); ++i) {
+      const ChunkPoint& p = buf[i];
+      st = files.add(keyOf(p.q[0] >> shift, p.q[1] >> shift, p.q[2] >> shift, level), p);
+    }
+  }
+  std::fclose(f);
+  SA_RETURN_IF_ERROR(st);
+  SA_RETURN_IF_ERROR(files.flushAll());
+  std::remove(c.path.c_str());
+  const uint64_t mask = (uint64_t(1) << level) - 1;
+  files.forEach([&](uint64_t key, uint64_t count) {
+    ChunkInfo ch;
+    ch.path = files.pathOf(key);
+    ch.count = count;
+    ch.level = level;
+    ch.ix = uint32_t((key >> (2 * level)) & mask);
+    ch.iy = uint32_t((key >> level) & mask);
+    ch.iz = uint32_t(key & mask);
+    children.push_back(ch);
+  });
+  return Status::ok();
+}
+
+}  // namespace
+
+Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress) {
+  out = BoundsInfo{};
+  BoundsSink sink(out, progress, input.pointCount());
+  SA_RETURN_IF_ERROR(input.stream(sink, false));
+  out.centroid = sink.centroid();
+  if (out.count == 0) return Status::badInput(input.files()[0].path + ": no finite points in the input");
+  return Status::ok();
+}
+
+Status distributePoints(const InputSet& input, const Quantizer& qz, const DistributeOptions& opt,
+                        DistributeResult& out, const ProgressFn& progress) {
+  // Start at the level where an even spread would fit, at most 8^3 = 512 nodes.
+  int level = 0;
+  const uint64_t n = input.pointCount();
+  while (level < 3 && (n >> (3 * level)) > opt.maxPointsPerChunk) ++level;
+  ChunkFiles files(opt.scratchDir, level);
+  {
+    DistributeSink sink(qz, opt, files, level, out, progress, n);
+    SA_RETURN_IF_ERROR(input.stream(sink, opt.keepTriangles));
+  }
+  SA_RETURN_IF_ERROR(files.flushAll());
+  std::vector<ChunkInfo> work;
+  const uint64_t mask = (uint64_t(1) << level) - 1;
+  files.forEach([&](uint64_t key, uint64_t count) {
+    ChunkInfo ch;
+    ch.path = files.pathOf(key);
+    ch.count = count;
+    ch.level = level;
+    ch.ix = uint32_t((key >> (2 * level)) & mask);
+    ch.iy = uint32_t((key >> level) & mask);
+    ch.iz = uint32_t(key & mask);
+    work.push_back(ch);
+  });
+  while (!work.empty()) {
+    ChunkInfo c = work.back();
+    work.pop_back();
+    if (c.count > opt.maxPointsPerChunk && c.level < opt.maxChunkLevel) {
+      SA_RETURN_IF_ERROR(splitChunk(c, opt.scratchDir, work));
+    } else {
+      out.chunks.push_back(c);
+    }
+  }
+  return Status::ok();
+}
+
+Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out) {
+  out.resize(chunk.count);
+  std::FILE* f = std::fopen(chunk.path.c_str(), "rb");
+  if (!f) return Status::internal(chunk.path + ": cannot open chunk file");
+  size_t r = std::fread(out.data(), sizeof(ChunkPoint), out.size(), f);
+  std::fclose(f);
+  if (r != out.size()) return Status::internal(chunk.path + ": chunk file shorter than recorded");
+  return Status::ok();
+}
+
+Status saveChunk(const std::string& path, const std::vector<ChunkPoint>& points) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) return Status::internal(path + ": cannot write chunk file");
+  size_t w = std::fwrite(points.data(), sizeof(ChunkPoint), points.size(), f);
+  bool ok = std::fclose(f) == 0 && w == points.size();
+  return ok ? Status::ok() : Status::internal(path + ": short write (disk full?)");
+}
+
+}  // namespace sa
+

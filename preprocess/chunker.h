@@ -1,0 +1,95 @@
+// Out-of-core stage, after PotreeConverter 2's count -> chunk scheme: one pass computes the
+// bounds, a second distributes points into on-disk chunk files, each an octree node small
+// enough (maxPointsPerChunk) to be processed in memory. Over-full chunks are re-split by
+// streaming their file into eight children.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "formats/source.h"
+
+namespace sa {
+
+// On-disk chunk record. Positions are integers relative to the root cube (see Quantizer);
+// never absolute floats.
+struct ChunkPoint {
+  uint32_t q[3];
+  float n[3];
+  uint8_t rgb[3];
+  uint8_t flags;
+  uint16_t scan;
+  uint16_t pad;
+  uint32_t vid;  // index of the point in its file (mesh vertex index for the triangle path)
+};
+static_assert(sizeof(ChunkPoint) == 36);
+
+// Maps positions relative to the pack origin to 32-bit integers over the root cube.
+struct Quantizer {
+  Eigen::Vector3d cubeMin = Eigen::Vector3d::Zero();  // relative to the pack origin
+  double cubeSize = 1;
+  uint32_t encode(double v, int axis) const {
+    double t = (v - cubeMin[axis]) / cubeSize * 4294967296.0;
+    if (!(t > 0)) return 0;
+    if (t >= 4294967295.0) return 4294967295u;
+    return static_cast<uint32_t>(t);
+  }
+  double decode(uint32_t q, int axis) const { return cubeMin[axis] + (q + 0.5) * (cubeSize / 4294967296.0); }
+};
+
+struct BoundsInfo {
+  Eigen::Vector3d min = Eigen::Vector3d::Constant(1e300), max = Eigen::Vector3d::Constant(-1e300);
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  // absolute
+  uint64_t count = 0;    // finite points
+  uint64_t skipped = 0;  // NaN / Inf coordinates
+};
+
+struct ChunkInfo {
+  std::string path;
+  uint64_t count = 0;
+  int level = 0;              // octree level of the chunk's node
+  uint32_t ix = 0, iy = 0, iz = 0;  // node coordinates at that level
+};
+
+using ProgressFn = std::function<void(const char* phase, uint64_t done, uint64_t total)>;
+
+// Pass 1: bounds, centroid, finite / skipped counts.
+Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress);
+
+// The node's cube, relative to the pack origin.
+inline void nodeCube(const Quantizer& qz, int level, uint32_t ix, uint32_t iy, uint32_t iz,
+                     Eigen::Vector3d& min, double& size) {
+  size = qz.cubeSize / double(1u << level);
+  min = qz.cubeMin + Eigen::Vector3d(ix, iy, iz) * size;
+}
+
+struct DistributeOptions {
+  uint64_t maxPointsPerChunk = 4u << 20;
+  int maxChunkLevel = 10;
+  std::string scratchDir;
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // pack origin (absolute)
+  bool keepTriangles = false;                        // also write triangles.bin
+};
+
+struct DistributeResult {
+  std::vector<ChunkInfo> chunks;
+  uint64_t triangles = 0;
+  std::string trianglePath;  // u32 triples, when keepTriangles
+  // Mesh vertices (triangle path only): positions relative to the pack origin and
+  // area-weighted normals, indexed by vertex id.
+  std::vector<double> vertexPos;
+  std::vector<float> vertexNormal;
+};
+
+// Pass 2: writes chunk files into options.scratchDir.
+Status distributePoints(const InputSet& input, const Quantizer& qz, const DistributeOptions& options,
+                        DistributeResult& out, const ProgressFn& progress);
+
+// Reads a chunk file whole.
+Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out);
+Status saveChunk(const std::string& path, const std::vector<ChunkPoint>& points);
+
+}  // namespace sa

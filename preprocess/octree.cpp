@@ -1,0 +1,132 @@
+#include "preprocess/octree.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+namespace sa {
+namespace {
+
+Eigen::Vector3d anyPerpendicular(const Eigen::Vector3d& a) {
+  Eigen::Vector3d t = std::abs(a.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  return a.cross(t).normalized();
+}
+
+}  // namespace
+
+PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size_t n, double cosMax,
+                  double outlierFraction) {
+  PlaneFit f;
+  if (n == 0) return f;
+  // Centroid and covariance relative to the first point (no cancellation at large offsets).
+  const Eigen::Vector3d ref(&pos[3 * size_t(idx[0])]);
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero(), nsum = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < n; ++i) {
+    sum += Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - ref;
+    const float* q = &nrm[3 * size_t(idx[i])];
+    nsum += Eigen::Vector3d(q[0], q[1], q[2]);
+  }
+  const Eigen::Vector3d mean = sum / double(n);
+  f.centroid = ref + mean;
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < n; ++i) {
+    Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - ref - mean;
+    cov += d * d.transpose();
+  }
+  cov /= double(n);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  const Eigen::Vector3d lambda = es.eigenvalues();  // ascending
+  const double scale = std::max(lambda[2], 0.0);
+  const Eigen::Vector3d meanNormal = nsum.norm() > 1e-12 ? Eigen::Vector3d(nsum.normalized()) : Eigen::Vector3d::UnitZ();
+  if (n < 3 || es.info() != Eigen::Success || !(scale > 0) || lambda[1] <= 1e-9 * scale) {
+    // Degenerate: one point, duplicates or a line. The plane is not determined by the
+    // points; take W from the normals, orthogonal to the line if there is one.
+    f.degenerate = true;
+    Eigen::Vector3d w = meanNormal;
+    if (scale > 0 && es.info() == Eigen::Success) {
+      const Eigen::Vector3d line = es.eigenvectors().col(2);
+      w -= line * line.dot(w);
+      w = w.norm() > 1e-6 ? Eigen::Vector3d(w.normalized()) : anyPerpendicular(line);
+      f.u = line;
+    } else {
+      f.u = anyPerpendicular(w);
+    }
+    f.w = w;
+  } else {
+    f.w = es.eigenvectors().col(0).normalized();
+    f.u = es.eigenvectors().col(2).normalized();
+    if (f.w.dot(nsum) < 0) f.w = -f.w;
+  }
+  f.u = (f.u - f.w * f.w.dot(f.u)).normalized();
+  f.v = f.w.cross(f.u);
+  // The height-field test (§3.1.2): every known normal must face the W side of the plane.
+  f.minCos = 1;
+  for (size_t i = 0; i < n; ++i) {
+    const float* q = &nrm[3 * size_t(idx[i])];
+    const double len2 = double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2];
+    if (!(len2 > 0.25)) continue;
+    const double c = (f.w.x() * q[0] + f.w.y() * q[1] + f.w.z() * q[2]) / std::sqrt(len2);
+    f.minCos = std::min(f.minCos, c);
+    if (c < cosMax) ++f.violations;
+  }
+  f.heightField = f.violations <= static_cast<uint32_t>(outlierFraction * double(n));
+  return f;
+}
+
+void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
+                 const Eigen::Vector3d& rootMin, double rootSize, int rootLevel, const OctreeParams& params,
+                 std::vector<OctreeCell>& out) {
+  const double cosMax = std::cos(params.maxAngleDeg * M_PI / 180.0);
+  struct Item { uint32_t first, count; int level; Eigen::Vector3d min; double size; };
+  std::vector<Item> stack{{0, static_cast<uint32_t>(idx.size()), rootLevel, rootMin, rootSize}};
+  while (!stack.empty()) {
+    Item it = stack.back();
+    stack.pop_back();
+    if (it.count == 0) continue;
+    PlaneFit fit = fitPlane(pos, nrm, idx.data() + it.first, it.count, cosMax, params.outlierFraction);
+    const bool canSplit = it.level < params.maxDepth && it.count >= params.minSplitPoints;
+    if (fit.heightField || !canSplit) {
+      OctreeCell c;
+      c.fit = fit;
+      c.first = it.first;
+      c.count = it.count;
+      c.level = it.level;
+      c.forced = !fit.heightField;
+      c.cubeMin = it.min;
+      c.cubeSize = it.size;
+      out.push_back(c);
+      continue;
+    }
+    // Partition into the 8 children by the cube centre: x, then y, then z.
+    const Eigen::Vector3d mid = it.min + Eigen::Vector3d::Constant(it.size / 2);
+    uint32_t* b = idx.data() + it.first;
+    uint32_t* e = b + it.count;
+    auto side = [&](int axis) { return [=](uint32_t i) { return pos[3 * size_t(i) + axis] < mid[axis]; }; };
+    uint32_t* xs = std::partition(b, e, side(0));
+    uint32_t* ranges[9];
+    uint32_t* ys[2] = {std::partition(b, xs, side(1)), std::partition(xs, e, side(1))};
+    ranges[0] = b;
+    ranges[2] = ys[0];
+    ranges[4] = xs;
+    ranges[6] = ys[1];
+    ranges[8] = e;
+    ranges[1] = std::partition(ranges[0], ranges[2], side(2));
+    ranges[3] = std::partition(ranges[2], ranges[4], side(2));
+    ranges[5] = std::partition(ranges[4], ranges[6], side(2));
+    ranges[7] = std::partition(ranges[6], ranges[8], side(2));
+    const double h = it.size / 2;
+    for (int c = 0; c < 8; ++c) {
+      const int cx = c >> 2, cy = (c >> 1) & 1, cz = c & 1;
+      Item ch;
+      ch.first = static_cast<uint32_t>(ranges[c] - idx.data());
+      ch.count = static_cast<uint32_t>(ranges[c + 1] - ranges[c]);
+      ch.level = it.level + 1;
+      ch.min = it.min + Eigen::Vector3d(cx * h, cy * h, cz * h);
+      ch.size = h;
+      stack.push_back(ch);
+    }
+  }
+}
+
+}  // namespace sa

@@ -1,0 +1,51 @@
+// Octree decomposition into height fields with the PCA test of Lu, Low & Zheng §3.1.2: a cell
+// is a height field when no point's normal faces away from the best-fit plane's normal W
+// (W's sign chosen to agree with the normals); otherwise it splits into 8, down to maxDepth.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace sa {
+
+struct OctreeParams {
+  int maxDepth = 10;          // global octree level limit (0 = the root cube)
+  double maxAngleDeg = 85.0;  // largest angle allowed between a normal and W (paper: 90)
+  uint32_t minSplitPoints = 32;  // cells with fewer points are never split (kept, flagged forced)
+  // Fraction of a cell's points whose normal may fail the test (estimated normals of merged,
+  // slightly misaligned scans are noisy; a strict test then splits flat regions for nothing).
+  double outlierFraction = 0.01;
+};
+
+struct PlaneFit {
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  Eigen::Vector3d u = Eigen::Vector3d::UnitX(), v = Eigen::Vector3d::UnitY(), w = Eigen::Vector3d::UnitZ();
+  bool degenerate = false;   // < 3 distinct points or collinear: frame from the normals
+  bool heightField = false;  // passed the normal test
+  double minCos = 1;         // smallest n·W over the cell's points with a valid normal
+  uint32_t violations = 0;   // points whose normal fails the test
+};
+
+// PCA plane of the points idx[0..n) (positions xyz-interleaved, normals likewise; a normal
+// of zero length counts as unknown) and the height-field test. Never produces NaN: single
+// points, duplicates and collinear sets fall back to a frame built from the mean normal.
+PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size_t n, double cosMax,
+                  double outlierFraction = 0);
+
+struct OctreeCell {
+  PlaneFit fit;
+  uint32_t first = 0, count = 0;  // range in the permuted index array
+  int level = 0;
+  bool forced = false;            // failed the test but could not split further
+  Eigen::Vector3d cubeMin;        // the octree cell's cube (relative to the pack origin)
+  double cubeSize = 0;
+};
+
+// Subdivides the cube (cubeMin, cubeSize, at octree level `level`) holding points idx.
+// Permutes idx so every emitted cell's points are contiguous; appends cells to `out`.
+void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
+                 const Eigen::Vector3d& cubeMin, double cubeSize, int level, const OctreeParams& params,
+                 std::vector<OctreeCell>& out);
+
+}  // namespace sa

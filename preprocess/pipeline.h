@@ -1,0 +1,46 @@
+// `scanatlas pack`: input files -> out-of-core chunks -> octree height fields -> height maps
+// -> pack file. Memory is bounded by PackOptions::memBudget for point inputs.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "formats/source.h"
+#include "preprocess/chunker.h"
+#include "preprocess/octree.h"
+
+namespace sa {
+
+struct PackOptions {
+  uint64_t memBudget = uint64_t(1) << 30;     // bytes
+  uint64_t texelBudget = uint64_t(64) << 20;  // texels over all tiles
+  double texelSize = 0;           // world units; 0 = from sample spacing and budget
+  double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
+  double coverageRadius = 1.5;    // in sample spacings: farther texels stay empty
+  bool asPoints = false;          // ignore faces: pull-push from the vertices
+  OctreeParams octree;
+  int normalNeighbours = 24;
+  uint32_t maxPageSize = 4096;
+  std::string scratchParent;      // where chunk files go (default: beside the output)
+  std::string commandLine;        // recorded in the NOTE section
+};
+
+struct PackSummary {
+  uint64_t pointsRead = 0, pointsSkipped = 0, triangles = 0;
+  uint32_t cells = 0, forcedCells = 0, degenerateCells = 0, pages = 0, pageSize = 0, chunks = 0;
+  uint64_t texels = 0, fileBytes = 0;
+  double spacing = 0, texelSize = 0;
+  double seconds[6] = {0, 0, 0, 0, 0, 0};
+  std::vector<uint32_t> cellsPerLevel;
+  bool normalsEstimated = false, fromTriangles = false, hasColor = false;
+  std::vector<std::string> warnings;
+};
+
+// Bytes of working memory per point while a chunk is processed (records, positions,
+// normals, kd-tree, tile samples); sets the chunk size from the memory budget.
+inline constexpr uint64_t kBytesPerPointInFlight = 240;
+
+Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& options,
+                 const ProgressFn& progress, PackSummary& summary);
+
+}  // namespace sa

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Configures (Release by default) and builds into build/. BUILD_TYPE and BUILD_DIR override.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/deps.sh
+BUILD_DIR=${BUILD_DIR:-build}
+BUILD_TYPE=${BUILD_TYPE:-Release}
+cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE="$BUILD_TYPE" >/dev/null
+cmake --build "$BUILD_DIR" -j"${JOBS:-2}"
