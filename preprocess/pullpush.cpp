@@ -1,5 +1,6 @@
 #include "preprocess/pullpush.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 
@@ -16,6 +17,50 @@ struct Level {
   std::vector<float> color;    // rgb, when present
 };
 
+// Least-squares quadratic w = q(u, v) over the samples, in coordinates normalised to the
+// tile. Pull-push then interpolates the residual, so texels beyond the last sample (inside
+// the coverage radius) follow the surface's slope and curvature instead of a flat average.
+// Ridge-regularised: few or degenerate samples fall back toward lower order, never NaN.
+struct Quadric {
+  double cu = 0, cv = 0, su = 1, sv = 1;
+  Eigen::Matrix<double, 6, 1> c = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 1> basis(double u, double v) const {
+    const double x = (u - cu) / su, y = (v - cv) / sv;
+    Eigen::Matrix<double, 6, 1> b;
+    b << 1, x, y, x * x, x * y, y * y;
+    return b;
+  }
+  double operator()(double u, double v) const { return c.dot(basis(u, v)); }
+};
+
+Quadric fitQuadric(const TileGrid& g, const double* u, const double* v, const double* w, size_t n) {
+  Quadric q;
+  q.cu = g.u0 + 0.5 * g.width * g.du;
+  q.cv = g.v0 + 0.5 * g.height * g.dv;
+  q.su = std::max(0.5 * g.width * g.du, 1e-300);
+  q.sv = std::max(0.5 * g.height * g.dv, 1e-300);
+  if (n == 0) return q;
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> rhs = Eigen::Matrix<double, 6, 1>::Zero();
+  double mean = 0;
+  for (size_t i = 0; i < n; ++i) mean += w[i];
+  mean /= double(n);
+  for (size_t i = 0; i < n; ++i) {
+    const auto b = q.basis(u[i], v[i]);
+    A.selfadjointView<Eigen::Lower>().rankUpdate(b);
+    rhs += b * (w[i] - mean);
+  }
+  A = A.selfadjointView<Eigen::Lower>();
+  const double ridge = 1e-6 * std::max(A.trace(), 1e-300);
+  A.diagonal().array() += ridge;
+  Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(A);
+  Eigen::Matrix<double, 6, 1> c = ldlt.solve(rhs);
+  if (ldlt.info() != Eigen::Success || !c.allFinite()) c.setZero();
+  c[0] += mean;
+  q.c = c;
+  return q;
+}
+
 }  // namespace
 
 void pullPushTile(const TileGrid& g, const double* u, const double* v, const double* w, const uint8_t* rgb,
@@ -28,6 +73,7 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
   lv[0].value.assign(size_t(W) * H, 0.0);
   if (hasColor) lv[0].color.assign(size_t(W) * H * 3, 0.f);
   std::vector<uint8_t> covered(size_t(W) * H, 0);
+  const Quadric trend = fitQuadric(g, u, v, w, n);
   const double ru = coverageRadius / g.du, rv = coverageRadius / g.dv;
   const int riu = static_cast<int>(std::ceil(ru)), riv = static_cast<int>(std::ceil(rv));
   // Splat: bilinear weights onto the four nearest texel centres (the finest level).
@@ -44,7 +90,7 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
         if (wt <= 0) continue;
         const size_t t = size_t(y) * W + x;
         lv[0].weight[t] += float(wt);
-        lv[0].value[t] += wt * w[s];
+        lv[0].value[t] += wt * (w[s] - trend(u[s], v[s]));
         if (hasColor)
           for (int c = 0; c < 3; ++c) lv[0].color[3 * t + c] += float(wt * rgb[3 * s + c]);
       }
@@ -134,7 +180,8 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
   const Level& L = lv[0];
   for (size_t t = 0; t < out.heights.size(); ++t) {
     if (!covered[t] || L.weight[t] <= 0) continue;
-    out.heights[t] = encodeHeight(L.value[t], g.wMin, g.wMax);
+    const int i = static_cast<int>(t % size_t(W)), j = static_cast<int>(t / size_t(W));
+    out.heights[t] = encodeHeight(L.value[t] + trend(g.u0 + (i + 0.5) * g.du, g.v0 + (j + 0.5) * g.dv), g.wMin, g.wMax);
     ++out.covered;
     if (hasColor) {
       for (int k = 0; k < 3; ++k)

@@ -1,1 +1,184 @@
 #include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+#include <random>
+
+#include "../common/test_util.h"
+#include "atlas/pack_file.h"
+#include "atlas/packing.h"
+
+namespace sa {
+namespace {
+
+std::vector<TileSize> randomTiles(int n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<uint32_t> side(1, 200);
+  std::vector<TileSize> t(n);
+  for (auto& s : t) s = {side(rng), side(rng)};
+  return t;
+}
+
+TEST(Packing, TilesWithGuttersNeverOverlapAndStayInsidePages) {
+  auto tiles = randomTiles(600, 3);
+  uint64_t area = 0;
+  for (auto& t : tiles) area += uint64_t(t.w + 2) * (t.h + 2);
+  const uint32_t page = choosePageSize(area, 200, 1024);
+  PackingResult r = packTiles(tiles, page);
+  ASSERT_EQ(r.placements.size(), tiles.size());
+  std::vector<std::vector<int>> owner(r.pageCount, std::vector<int>(size_t(page) * page, -1));
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    const auto& p = r.placements[i];
+    ASSERT_LT(p.page, r.pageCount);
+    // The slot including its one-texel gutter.
+    ASSERT_GE(p.x, 1u);
+    ASSERT_GE(p.y, 1u);
+    ASSERT_LE(p.x + tiles[i].w + 1, page);
+    ASSERT_LE(p.y + tiles[i].h + 1, page);
+    for (uint32_t y = p.y - 1; y < p.y + tiles[i].h + 1; ++y)
+      for (uint32_t x = p.x - 1; x < p.x + tiles[i].w + 1; ++x) {
+        int& o = owner[p.page][size_t(y) * page + x];
+        ASSERT_EQ(o, -1) << "tiles " << o << " and " << i << " overlap at " << x << "," << y;
+        o = int(i);
+      }
+  }
+  double used = 0;
+  for (auto& t : tiles) used += double(t.w) * t.h;
+  std::printf("packing occupancy %.1f%% over %u page(s) of %u^2\n", 100 * used / (double(page) * page * r.pageCount),
+              r.pageCount, page);
+}
+
+struct SmallPack {
+  PackMeta meta{};
+  std::vector<CellRecord> cells;
+  std::vector<std::vector<uint16_t>> heights;
+  std::vector<std::vector<uint8_t>> rgba;
+};
+
+SmallPack makePack(bool color) {
+  SmallPack sp;
+  auto tiles = randomTiles(40, 11);
+  PackingResult r = packTiles(tiles, 512);
+  sp.meta.origin[0] = 512345.678;
+  sp.meta.origin[1] = 5012345.25;
+  sp.meta.origin[2] = 101.5;
+  sp.meta.pageSize = 512;
+  sp.meta.pageCount = r.pageCount;
+  sp.meta.flags = color ? uint32_t(kPackHasColor) : 0u;
+  sp.meta.texelSize = 0.01;
+  std::mt19937 rng(5);
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    CellRecord c{};
+    for (int a = 0; a < 3; ++a) c.origin[a] = double(i) * 0.1 + a;
+    c.u[0] = c.v[1] = c.w[2] = 1;
+    c.box[0] = -1; c.box[1] = 1; c.box[2] = -2; c.box[3] = 2; c.box[4] = -0.5; c.box[5] = 0.5;
+    c.page = r.placements[i].page;
+    c.tileX = r.placements[i].x;
+    c.tileY = r.placements[i].y;
+    c.tileW = uint16_t(tiles[i].w);
+    c.tileH = uint16_t(tiles[i].h);
+    c.level = uint8_t(i % 9);
+    sp.cells.push_back(c);
+    std::vector<uint16_t> h(size_t(c.tileW) * c.tileH);
+    for (auto& v : h) v = uint16_t(rng());
+    sp.heights.push_back(h);
+    std::vector<uint8_t> col(h.size() * 4);
+    for (auto& v : col) v = uint8_t(rng());
+    sp.rgba.push_back(col);
+  }
+  return sp;
+}
+
+TEST(PackFile, RoundTripsBitExactlyWithGutters) {
+  test::TempDir d;
+  for (bool color : {false, true}) {
+    SmallPack sp = makePack(color);
+    PackWriter w;
+    ASSERT_TRUE(w.open(d.file("p.hfa"), sp.meta, sp.cells, "note").isOk());
+    for (uint32_t i = 0; i < sp.cells.size(); ++i)
+      ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), color ? sp.rgba[i].data() : nullptr).isOk());
+    ASSERT_TRUE(w.finish().isOk());
+    PackReader r;
+    Status s = r.open(d.file("p.hfa"));
+    ASSERT_TRUE(s.isOk()) << s.message();
+    ASSERT_TRUE(r.verifyPages().isOk());
+    EXPECT_EQ(r.note(), "note");
+    EXPECT_EQ(r.hasColor(), color);
+    EXPECT_EQ(r.meta().origin[1], 5012345.25);
+    ASSERT_EQ(r.cells().size(), sp.cells.size());
+    EXPECT_EQ(std::memcmp(r.cells().data(), sp.cells.data(), sp.cells.size() * sizeof(CellRecord)), 0);
+    for (uint32_t i = 0; i < sp.cells.size(); ++i) {
+      const CellRecord& c = sp.cells[i];
+      for (int j = -1; j <= int(c.tileH); ++j)
+        for (int k = -1; k <= int(c.tileW); ++k) {
+          // Interior texels exact; gutter texels repeat the nearest edge texel.
+          const int sj = std::clamp(j, 0, int(c.tileH) - 1), sk = std::clamp(k, 0, int(c.tileW) - 1);
+          ASSERT_EQ(r.texel(c, k, j), sp.heights[i][size_t(sj) * c.tileW + sk]) << "cell " << i << " " << k << "," << j;
+          if (color) {
+            const uint8_t* page = r.colorPage(c.page);
+            const size_t t = (size_t(c.tileY + j) * r.meta().pageSize + c.tileX + k) * 4;
+            ASSERT_EQ(std::memcmp(page + t, &sp.rgba[i][(size_t(sj) * c.tileW + sk) * 4], 4), 0);
+          }
+        }
+    }
+  }
+}
+
+TEST(PackFile, HeaderBytesMatchTheSpec) {
+  test::TempDir d;
+  SmallPack sp = makePack(false);
+  PackWriter w;
+  ASSERT_TRUE(w.open(d.file("p.hfa"), sp.meta, sp.cells, "").isOk());
+  ASSERT_TRUE(w.finish().isOk());
+  std::ifstream f(d.file("p.hfa"), std::ios::binary);
+  std::vector<unsigned char> b(64 + 32 * 4);
+  f.read(reinterpret_cast<char*>(b.data()), std::streamsize(b.size()));
+  EXPECT_EQ(std::string(reinterpret_cast<char*>(b.data()), 8), std::string("SCANHFA\0", 8));
+  EXPECT_EQ(b[8], 1);                                        // version 1, little-endian
+  EXPECT_EQ(b[12], 0x04); EXPECT_EQ(b[15], 0x01);            // byte-order mark
+  EXPECT_EQ(b[16], 4);                                       // META CELL HGHT NOTE
+  EXPECT_EQ(b[20], 64);                                      // header size
+  EXPECT_EQ(b[32], 64);                                      // section table offset
+  EXPECT_EQ(std::string(reinterpret_cast<char*>(&b[64]), 4), "META");
+  EXPECT_EQ(b[64 + 9], 0x10);                                // META at offset 4096
+  EXPECT_EQ(std::string(reinterpret_cast<char*>(&b[96]), 4), "CELL");
+}
+
+TEST(PackFile, ReaderRejectsCorruptTruncatedAndNewerFiles) {
+  test::TempDir d;
+  SmallPack sp = makePack(false);
+  PackWriter w;
+  ASSERT_TRUE(w.open(d.file("p.hfa"), sp.meta, sp.cells, "").isOk());
+  for (uint32_t i = 0; i < sp.cells.size(); ++i) ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), nullptr).isOk());
+  ASSERT_TRUE(w.finish().isOk());
+  std::ifstream in(d.file("p.hfa"), std::ios::binary);
+  std::vector<char> good((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto expectError = [&](std::vector<char> bytes, const std::string& needle) {
+    test::writeBytes(d.file("bad.hfa"), bytes);
+    PackReader r;
+    Status s = r.open(d.file("bad.hfa"));
+    if (s.isOk()) s = r.verifyPages();
+    ASSERT_FALSE(s.isOk()) << needle;
+    EXPECT_NE(s.message().find(needle), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find("bad.hfa"), std::string::npos) << s.message();
+  };
+  auto v = good;
+  v[8] = 2;
+  expectError(v, "version 2 is newer");
+  v = good;
+  v[0] = 'X';
+  expectError(v, "bad magic");
+  v = good;
+  v.resize(v.size() / 2);
+  expectError(v, "truncated");
+  v = good;
+  v[4096 + 112] ^= 1;  // cell count inside META
+  expectError(v, "META checksum");
+  v = good;
+  v[v.size() - 100] ^= 0x5a;  // a height texel in the last page
+  expectError(v, "HGHT checksum");
+  expectError(std::vector<char>(10, 0), "too short");
+}
+
+}  // namespace
+}  // namespace sa

@@ -44,17 +44,15 @@ void writePointsPly(const std::string& path, const std::vector<Eigen::Vector3d>&
                     const std::vector<Eigen::Vector3d>* normals) {
   std::ofstream f(path, std::ios::binary);
   f << "ply\nformat binary_little_endian 1.0\nelement vertex " << pts.size()
-    << "\nproperty float x\nproperty float y\nproperty float z\n";
+    << "\nproperty double x\nproperty double y\nproperty double z\n";
   if (normals) f << "property float nx\nproperty float ny\nproperty float nz\n";
   f << "end_header\n";
   for (size_t i = 0; i < pts.size(); ++i) {
-    float v[6] = {float(pts[i].x()), float(pts[i].y()), float(pts[i].z()), 0, 0, 0};
+    f.write(reinterpret_cast<const char*>(pts[i].data()), 24);
     if (normals) {
-      v[3] = float((*normals)[i].x());
-      v[4] = float((*normals)[i].y());
-      v[5] = float((*normals)[i].z());
+      const float n[3] = {float((*normals)[i].x()), float((*normals)[i].y()), float((*normals)[i].z())};
+      f.write(reinterpret_cast<const char*>(n), 12);
     }
-    f.write(reinterpret_cast<const char*>(v), normals ? 24 : 12);
   }
 }
 

@@ -26,7 +26,7 @@ class TempDir {
 void writeText(const std::string& path, const std::string& text);
 void writeBytes(const std::string& path, const std::vector<char>& bytes);
 
-// Binary little-endian PLY with float xyz (+ float normals when given).
+// Binary little-endian PLY with double xyz (+ float normals when given).
 void writePointsPly(const std::string& path, const std::vector<Eigen::Vector3d>& pts,
                     const std::vector<Eigen::Vector3d>* normals = nullptr);
 

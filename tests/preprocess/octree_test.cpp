@@ -1,1 +1,140 @@
+#include "preprocess/octree.h"
+
 #include <gtest/gtest.h>
+
+#include <random>
+
+#include "../common/test_util.h"
+
+namespace sa {
+namespace {
+
+struct Cloud {
+  std::vector<double> pos;
+  std::vector<float> nrm;
+  void add(const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+    pos.insert(pos.end(), {p.x(), p.y(), p.z()});
+    nrm.insert(nrm.end(), {float(n.x()), float(n.y()), float(n.z())});
+  }
+  std::vector<uint32_t> indices() const {
+    std::vector<uint32_t> idx(pos.size() / 3);
+    for (uint32_t i = 0; i < idx.size(); ++i) idx[i] = i;
+    return idx;
+  }
+};
+
+std::vector<OctreeCell> build(const Cloud& c, OctreeParams p = {}) {
+  auto idx = c.indices();
+  std::vector<OctreeCell> cells;
+  buildOctree(c.pos.data(), c.nrm.data(), idx, Eigen::Vector3d::Constant(-1), 2.0, 0, p, cells);
+  return cells;
+}
+
+bool finiteFit(const PlaneFit& f) {
+  return f.centroid.allFinite() && f.u.allFinite() && f.v.allFinite() && f.w.allFinite() &&
+         std::abs(f.w.norm() - 1) < 1e-9 && std::abs(f.u.dot(f.w)) < 1e-9 && std::abs(f.v.dot(f.w)) < 1e-9;
+}
+
+TEST(Octree, TiltedPlaneIsOneCell) {
+  Cloud c;
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> U(-0.9, 0.9);
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, 0.2, 1).normalized();
+  for (int i = 0; i < 20000; ++i) {
+    Eigen::Vector3d p(U(rng), U(rng), 0);
+    p.z() = -(n.x() * p.x() + n.y() * p.y()) / n.z();
+    c.add(p, n);
+  }
+  auto cells = build(c);
+  ASSERT_EQ(cells.size(), 1u);
+  EXPECT_TRUE(cells[0].fit.heightField);
+  EXPECT_NEAR(std::abs(cells[0].fit.w.dot(n)), 1.0, 1e-9);
+  EXPECT_GT(cells[0].fit.w.dot(n), 0);  // W agrees with the normals
+}
+
+TEST(Octree, SphereSplitsIntoAtLeastEightHeightFields) {
+  Cloud c;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(50000, 0.9, Eigen::Vector3d::Zero(), pts, nrm);
+  for (size_t i = 0; i < pts.size(); ++i) c.add(pts[i], nrm[i]);
+  OctreeParams p;
+  p.outlierFraction = 0;  // exact normals: the paper's strict test
+  auto cells = build(c, p);
+  EXPECT_GE(cells.size(), 8u);
+  size_t total = 0;
+  for (const auto& cell : cells) {
+    EXPECT_TRUE(cell.fit.heightField);
+    EXPECT_FALSE(cell.forced);
+    total += cell.count;
+  }
+  EXPECT_EQ(total, pts.size());
+}
+
+TEST(Octree, DegenerateCellsNeverProduceNaN) {
+  const float n[3] = {0, 0, 1};
+  // Single point.
+  {
+    double p[3] = {0.1, 0.2, 0.3};
+    uint32_t idx = 0;
+    PlaneFit f = fitPlane(p, n, &idx, 1, 0.0);
+    EXPECT_TRUE(finiteFit(f));
+    EXPECT_TRUE(f.degenerate);
+  }
+  // Duplicates.
+  {
+    std::vector<double> p;
+    std::vector<float> nn;
+    std::vector<uint32_t> idx;
+    for (uint32_t i = 0; i < 50; ++i) {
+      p.insert(p.end(), {1e6 + 0.5, 5e6 + 0.25, 100.0});
+      nn.insert(nn.end(), {0, 1, 0});
+      idx.push_back(i);
+    }
+    PlaneFit f = fitPlane(p.data(), nn.data(), idx.data(), idx.size(), 0.0);
+    EXPECT_TRUE(finiteFit(f));
+    EXPECT_NEAR(f.w.y(), 1.0, 1e-9);
+  }
+  // Collinear: W must be orthogonal to the line and close to the normals.
+  {
+    std::vector<double> p;
+    std::vector<float> nn;
+    std::vector<uint32_t> idx;
+    for (uint32_t i = 0; i < 50; ++i) {
+      p.insert(p.end(), {i * 0.01, i * 0.01, 0.0});
+      nn.insert(nn.end(), {0, 0, 1});
+      idx.push_back(i);
+    }
+    PlaneFit f = fitPlane(p.data(), nn.data(), idx.data(), idx.size(), 0.0);
+    EXPECT_TRUE(finiteFit(f));
+    EXPECT_TRUE(f.degenerate);
+    EXPECT_NEAR(f.w.dot(Eigen::Vector3d(1, 1, 0).normalized()), 0.0, 1e-9);
+    EXPECT_NEAR(f.w.z(), 1.0, 1e-9);
+  }
+  // Two points, and points without normals (zero vectors).
+  {
+    double p[6] = {0, 0, 0, 1, 1, 1};
+    float zn[6] = {0, 0, 0, 0, 0, 0};
+    uint32_t idx[2] = {0, 1};
+    PlaneFit f = fitPlane(p, zn, idx, 2, 0.0);
+    EXPECT_TRUE(finiteFit(f));
+  }
+}
+
+TEST(Octree, PointsOnSplitPlanesAreKeptOnce) {
+  Cloud c;
+  for (int i = 0; i < 200; ++i) {
+    c.add(Eigen::Vector3d(0, 0, i * 0.004 - 0.4), Eigen::Vector3d(1, 0, 0));   // on x = 0 and y = 0 planes
+    c.add(Eigen::Vector3d(0.5, 0, i * 0.004 - 0.4), Eigen::Vector3d(-1, 0, 0)); // facing the other way
+  }
+  auto cells = build(c);
+  size_t total = 0;
+  for (const auto& cell : cells) {
+    total += cell.count;
+    EXPECT_TRUE(finiteFit(cell.fit));
+  }
+  EXPECT_EQ(total, 400u);
+  EXPECT_GE(cells.size(), 2u);  // opposite normals cannot share a height field
+}
+
+}  // namespace
+}  // namespace sa

@@ -1,1 +1,192 @@
+// The GPU path against a double-precision CPU ray cast of the same pack, a camera inside a
+// box, and georeferenced offsets.
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "../common/test_util.h"
+#include "atlas/raycast.h"
+#include "preprocess/pipeline.h"
+#include "viewer/egl_context.h"
+#include "viewer/renderer.h"
+
+namespace sa {
+namespace {
+
+class RenderTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    ctx_ = new EglContext;
+    Status s = ctx_->init();
+    ASSERT_TRUE(s.isOk()) << s.message();
+  }
+  static void TearDownTestSuite() { delete ctx_; }
+  static EglContext* ctx_;
+
+  std::string pack(const std::vector<Eigen::Vector3d>& pts, const std::vector<Eigen::Vector3d>& nrm,
+                   const std::string& name, PackOptions opt = {}) {
+    test::writePointsPly(dir_.file(name + ".ply"), pts, &nrm);
+    auto in = InputSet::open({dir_.file(name + ".ply")});
+    EXPECT_TRUE(in.isOk());
+    PackSummary sum;
+    Status s = packInput(*in, dir_.file(name + ".hfa"), opt, nullptr, sum);
+    EXPECT_TRUE(s.isOk()) << s.message();
+    return dir_.file(name + ".hfa");
+  }
+
+  // Linear depth of the CPU reference ray cast for every pixel (+inf on a miss).
+  static std::vector<float> cpuDepth(const PackReader& p, const Camera& cam) {
+    CpuRaycaster rc(p);
+    const Eigen::Vector3d origin(p.meta().origin);
+    std::vector<float> d(size_t(cam.width) * cam.height, INFINITY);
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const Eigen::Vector3d dir = cam.rayDirection(x + 0.5, y + 0.5);
+        RayHit h = rc.cast(cam.eye - origin, dir);
+        if (h.hit) d[size_t(y) * cam.width + x] = float(h.t * dir.dot(cam.forward()));
+      }
+    return d;
+  }
+
+  test::TempDir dir_;
+};
+EglContext* RenderTest::ctx_ = nullptr;
+
+struct Agreement {
+  size_t covered = 0, agree = 0;
+  double maxErr = 0;
+};
+
+Agreement agreement(const std::vector<float>& gpu, const std::vector<float>& cpu, double tol) {
+  Agreement a;
+  for (size_t i = 0; i < gpu.size(); ++i) {
+    const bool g = std::isfinite(gpu[i]), c = std::isfinite(cpu[i]);
+    if (!g && !c) continue;
+    ++a.covered;
+    if (g && c) {
+      const double e = std::abs(double(gpu[i]) - cpu[i]);
+      a.maxErr = std::max(a.maxErr, e);
+      if (e <= tol) ++a.agree;
+    }
+  }
+  return a;
+}
+
+// Stated tolerance: 0.1% of the bounding-box diagonal, on >= 99% of the pixels either
+// render covers.
+TEST_F(RenderTest, GpuMatchesCpuRayCast) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(30000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  PackReader p;
+  ASSERT_TRUE(p.open(pack(pts, nrm, "sphere")).isOk());
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  const double diag = Eigen::Vector3d(2, 2, 2).norm();
+  for (const Eigen::Vector3d& eye : {Eigen::Vector3d(0.4, 1.1, 3.2), Eigen::Vector3d(-2.5, -0.3, 1.2)}) {
+    Camera cam;
+    cam.eye = eye;
+    cam.target = Eigen::Vector3d(0.05, -0.02, 0.01);
+    cam.width = cam.height = 96;
+    cam.fovDeg = 50;
+    FrameResult fr;
+    ASSERT_TRUE(r.render(cam, RenderSettings{}, fr, true).isOk());
+    const auto ref = cpuDepth(p, cam);
+    const Agreement a = agreement(fr.depth, ref, 1e-3 * diag);
+    std::printf("GPU vs CPU ray cast: %zu of %zu covered pixels agree within 0.1%% of the diagonal (max diff %.3g)\n",
+                a.agree, a.covered, a.maxErr);
+    ASSERT_GT(a.covered, 2000u);
+    EXPECT_GE(double(a.agree), 0.99 * double(a.covered));
+  }
+}
+
+// A camera inside a cell's box still sees the height field (the box's back faces are drawn
+// and the ray's entry point is computed analytically).
+TEST_F(RenderTest, CameraInsideABoxSeesTheSurface) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  for (int j = 0; j < 300; ++j)
+    for (int i = 0; i < 300; ++i) {
+      const double x = -1 + i / 150.0, y = -1 + j / 150.0;
+      const double z = 0.1 * std::sin(4 * x) * std::cos(3 * y);
+      pts.emplace_back(x, y, z);
+      nrm.push_back(Eigen::Vector3d(-0.4 * std::cos(4 * x) * std::cos(3 * y), 0.3 * std::sin(4 * x) * std::sin(3 * y), 1).normalized());
+    }
+  PackReader p;
+  ASSERT_TRUE(p.open(pack(pts, nrm, "bumps")).isOk());
+  ASSERT_EQ(p.cells().size(), 1u);
+  const CellRecord& c = p.cells()[0];
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  Camera cam;
+  // Inside the box: between the surface (|z| <= 0.1) and the box top, near a trough.
+  const Eigen::Vector3d origin(p.meta().origin);
+  cam.eye = Eigen::Vector3d(-0.4, 0.0, 0.0) + origin * 0;
+  cam.eye.z() = 0.08;
+  cam.target = cam.eye + Eigen::Vector3d(1, 0.2, -0.4);
+  cam.up = Eigen::Vector3d::UnitZ();
+  cam.width = cam.height = 64;
+  // The camera really is inside the box.
+  const Eigen::Vector3d rel = cam.eye - origin - Eigen::Vector3d(c.origin);
+  const double w = rel.dot(Eigen::Vector3d(c.w));
+  ASSERT_GT(w, c.box[4]);
+  ASSERT_LT(w, c.box[5]);
+  FrameResult fr;
+  ASSERT_TRUE(r.render(cam, RenderSettings{}, fr, true).isOk());
+  const auto ref = cpuDepth(p, cam);
+  const Agreement a = agreement(fr.depth, ref, 1e-3 * 3);
+  std::printf("inside a box: %zu of %zu covered pixels agree\n", a.agree, a.covered);
+  EXPECT_GT(a.covered, 64u * 64 / 3);
+  EXPECT_GE(double(a.agree), 0.97 * double(a.covered));
+}
+
+// Camera-relative rendering: the same object at georeferenced coordinates renders the same
+// depth image (difference <= 1e-4 of the diagonal) as at the origin.
+TEST_F(RenderTest, GeoreferencedOffsetRendersTheSame) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  const Eigen::Vector3d offset(5e5, 5e6, 1e2);
+  std::vector<Eigen::Vector3d> moved = pts;
+  for (auto& q : moved) q += offset;
+  PackOptions opt;
+  opt.texelSize = 0.01;
+  PackReader a, b;
+  ASSERT_TRUE(a.open(pack(pts, nrm, "near", opt)).isOk());
+  ASSERT_TRUE(b.open(pack(moved, nrm, "far", opt)).isOk());
+  Camera cam;
+  cam.eye = Eigen::Vector3d(0.5, 1.0, 3.0);
+  cam.target = Eigen::Vector3d::Zero();
+  cam.width = cam.height = 96;
+  Camera camFar = cam;
+  camFar.eye += offset;
+  camFar.target += offset;
+  FrameResult fa, fb;
+  {
+    Renderer r;
+    ASSERT_TRUE(r.init(a).isOk());
+    ASSERT_TRUE(r.render(cam, RenderSettings{}, fa, true).isOk());
+  }
+  {
+    Renderer r;
+    ASSERT_TRUE(r.init(b).isOk());
+    ASSERT_TRUE(r.render(camFar, RenderSettings{}, fb, true).isOk());
+  }
+  const double diag = Eigen::Vector3d(2, 2, 2).norm();
+  size_t both = 0, differ = 0;
+  double maxDiff = 0;
+  for (size_t i = 0; i < fa.depth.size(); ++i) {
+    const bool ha = std::isfinite(fa.depth[i]), hb = std::isfinite(fb.depth[i]);
+    if (ha != hb) ++differ;
+    if (ha && hb) {
+      ++both;
+      maxDiff = std::max(maxDiff, std::abs(double(fa.depth[i]) - fb.depth[i]));
+    }
+  }
+  std::printf("offset (5e5, 5e6, 1e2): %zu pixels, coverage differs on %zu, max depth diff %.3g (%.2g of diagonal)\n",
+              both, differ, maxDiff, maxDiff / diag);
+  EXPECT_GT(both, 1000u);
+  EXPECT_LE(differ, both / 200);
+  EXPECT_LE(maxDiff, 1e-4 * diag);
+}
+
+}  // namespace
+}  // namespace sa
