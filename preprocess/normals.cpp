@@ -69,29 +69,70 @@ void estimateNormals(const double* pos, size_t n, int k, const NormalOrientation
   });
 }
 
-double estimateSpacing(const double* pos, size_t n, size_t samples) {
-  if (n < 2) return 0;
-  flann::Matrix<double> data(const_cast<double*>(pos), n, 3);
+namespace {
+
+// Nearest-neighbour distances of up to `queries` points of `tp[0..m)` whose index passes
+// `accept`, appended to `out`.
+template <class Accept>
+void nearestDistances(const double* tp, size_t m, size_t queries, Accept accept, std::vector<double>& out) {
+  if (m < 2) return;
+  flann::Matrix<double> data(const_cast<double*>(tp), m, 3);
   KdTree tree(data, flann::KDTreeSingleIndexParams(15));
   tree.buildIndex();
-  const size_t m = std::min(samples, n);
-  std::vector<double> q(3 * m);
-  for (size_t a = 0; a < m; ++a) {
-    const size_t i = a * n / m;
-    std::copy(pos + 3 * i, pos + 3 * i + 3, &q[3 * a]);
-  }
-  std::vector<int> ind(m * 2);
-  std::vector<double> dist(m * 2);
-  flann::Matrix<int> mi(ind.data(), m, 2);
-  flann::Matrix<double> md(dist.data(), m, 2);
-  flann::Matrix<double> mq(q.data(), m, 3);
+  std::vector<double> qs;
+  for (size_t a = 0; a < m && qs.size() < 3 * queries; a += std::max<size_t>(1, m / queries))
+    if (accept(a)) qs.insert(qs.end(), tp + 3 * a, tp + 3 * a + 3);
+  const size_t q = qs.size() / 3;
+  if (q == 0) return;
+  std::vector<int> ind(q * 2);
+  std::vector<double> dist(q * 2);
+  flann::Matrix<int> mi(ind.data(), q, 2);
+  flann::Matrix<double> md(dist.data(), q, 2);
+  flann::Matrix<double> mq(qs.data(), q, 3);
   tree.knnSearch(mq, mi, md, 2, flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
+  for (size_t a = 0; a < q; ++a)
+    if (dist[2 * a + 1] > 0) out.push_back(std::sqrt(dist[2 * a + 1]));  // [0] is the point itself
+}
+
+}  // namespace
+
+double estimateSpacing(const double* pos, size_t n, size_t samples) {
+  if (n < 2) return 0;
   std::vector<double> d;
-  d.reserve(m);
-  for (size_t a = 0; a < m; ++a) {
-    // The nearest hit is the point itself (distance 0), unless a duplicate came first.
-    const double d1 = dist[2 * a + 1];
-    if (d1 > 0) d.push_back(std::sqrt(d1));
+  constexpr size_t kMaxTree = 1 << 17;
+  if (n <= kMaxTree) {
+    nearestDistances(pos, n, samples, [](size_t) { return true; }, d);
+  } else {
+    // A kd-tree over millions of points costs more than the rest of the chunk's octree.
+    // Spacing is local: take a few sub-cubes holding about kMaxTree / 4 points each (at full
+    // density, so regular scan grids keep their true spacing), and query only points away
+    // from the sub-cube's faces.
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+    for (size_t i = 0; i < n; ++i) {
+      lo = lo.cwiseMin(Eigen::Vector3d(&pos[3 * i]));
+      hi = hi.cwiseMax(Eigen::Vector3d(&pos[3 * i]));
+    }
+    const size_t want = kMaxTree / 4;
+    double side = (hi - lo).maxCoeff() * std::sqrt(double(want) / double(n));  // surfaces: area ~ side^2
+    std::vector<double> sub;
+    for (int seed = 0; seed < 4; ++seed) {
+      const Eigen::Vector3d c(&pos[3 * ((2 * seed + 1) * n / 8)]);
+      for (int attempt = 0; attempt < 8; ++attempt) {
+        sub.clear();
+        for (size_t i = 0; i < n && sub.size() <= 3 * 4 * want; ++i) {
+          const Eigen::Vector3d p(&pos[3 * i]);
+          if (((p - c).cwiseAbs().array() <= side / 2).all()) sub.insert(sub.end(), {p.x(), p.y(), p.z()});
+        }
+        const size_t m = sub.size() / 3;
+        if (m < want / 4) side *= 1.6;
+        else if (m > 4 * want) side /= 1.6;
+        else break;
+      }
+      const double inner = side / 4;
+      nearestDistances(sub.data(), sub.size() / 3, samples / 4, [&](size_t a) {
+        return ((Eigen::Vector3d(&sub[3 * a]) - c).cwiseAbs().array() <= inner).all();
+      }, d);
+    }
   }
   if (d.empty()) return 0;
   std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());

@@ -76,6 +76,7 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
   const Quadric trend = fitQuadric(g, u, v, w, n);
   const double ru = coverageRadius / g.du, rv = coverageRadius / g.dv;
   const int riu = static_cast<int>(std::ceil(ru)), riv = static_cast<int>(std::ceil(rv));
+  // Coverage disks are stamped row by row: one square root per row, then a fill.
   // Splat: bilinear weights onto the four nearest texel centres (the finest level).
   for (size_t s = 0; s < n; ++s) {
     const double fx = (u[s] - g.u0) / g.du - 0.5, fy = (v[s] - g.v0) / g.dv - 0.5;
@@ -96,13 +97,15 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
       }
     }
     // Coverage: every texel centre within the radius of this sample.
-    const int cx = static_cast<int>(std::lround(fx)), cy = static_cast<int>(std::lround(fy));
+    const int cy = static_cast<int>(std::lround(fy));
     for (int y = std::max(0, cy - riv - 1); y <= std::min(H - 1, cy + riv + 1); ++y) {
       const double dy = (y - fy) / rv;
-      for (int x = std::max(0, cx - riu - 1); x <= std::min(W - 1, cx + riu + 1); ++x) {
-        const double dx = (x - fx) / ru;
-        if (dx * dx + dy * dy <= 1.0) covered[size_t(y) * W + x] = 1;
-      }
+      const double span = 1.0 - dy * dy;
+      if (span < 0) continue;
+      const double half = std::sqrt(span) * ru;  // the disk's half-width on this row
+      const int x0 = std::max(0, static_cast<int>(std::ceil(fx - half)));
+      const int x1 = std::min(W - 1, static_cast<int>(std::floor(fx + half)));
+      if (x0 <= x1) std::fill(covered.begin() + (size_t(y) * W + x0), covered.begin() + (size_t(y) * W + x1 + 1), 1);
     }
   }
   auto normalize = [&](Level& L) {

@@ -14,6 +14,59 @@
 namespace sa {
 namespace {
 
+struct ViewStats {
+  double iouMin = 1, medMax = 0;
+};
+
+ViewStats compareViews(const PackReader& pack, const TriangleMesh& mesh, int views, int size, const char* name) {
+  EglContext ctx;
+  EXPECT_TRUE(ctx.init().isOk());
+  Renderer r;
+  EXPECT_TRUE(r.init(pack).isOk());
+  // Cameras framed on the reference mesh's bounding box.
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (size_t i = 0; i < mesh.positions.size(); i += 3) {
+    lo = lo.cwiseMin(Eigen::Vector3d(&mesh.positions[i]));
+    hi = hi.cwiseMax(Eigen::Vector3d(&mesh.positions[i]));
+  }
+  const double diag = (hi - lo).norm();
+  auto cams = orbitCameras(lo, hi, views, Eigen::Vector3d::UnitY(), 40, size, size);
+  ViewStats st;
+  for (size_t v = 0; v < cams.size(); ++v) {
+    FrameResult fr;
+    EXPECT_TRUE(r.render(cams[v], RenderSettings{}, fr, true).isOk());
+    const auto ref = referenceDepth(mesh, cams[v]);
+    const DepthComparison c = compareDepth(fr.depth, ref, diag);
+    std::printf("%s view %zu: IoU %.4f, depth error median %.5f%% p95 %.4f%% of the diagonal "
+                "(both %zu, only render %zu, only reference %zu)\n",
+                name, v, c.iou, 100 * c.medianRelError, 100 * c.p95RelError, c.both, c.onlyTest, c.onlyRef);
+    st.iouMin = std::min(st.iouMin, c.iou);
+    st.medMax = std::max(st.medMax, c.medianRelError);
+  }
+  return st;
+}
+
+// The triangle path: the dragon mesh rasterized into height maps, against the same mesh.
+TEST(Accuracy, DragonMeshTrianglePathAgainstItself) {
+  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
+  test::TempDir dir;
+  const std::string src = test::sharedData("stanford_dragon/reconstruction/dragon_vrip.ply");
+  auto input = InputSet::open({src});
+  ASSERT_TRUE(input.isOk()) << input.status().message();
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*input, dir.file("d.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_TRUE(sum.fromTriangles);
+  PackReader pack;
+  ASSERT_TRUE(pack.open(dir.file("d.hfa")).isOk());
+  auto mesh = loadMesh(src);
+  ASSERT_TRUE(mesh.isOk());
+  const ViewStats st = compareViews(pack, *mesh, 4, 512, "dragon");
+  std::printf("dragon: %u cells (%u forced), worst IoU %.4f, worst median depth error %.5f%%\n", sum.cells,
+              sum.forcedCells, st.iouMin, 100 * st.medMax);
+  EXPECT_GE(st.iouMin, 0.97);
+  EXPECT_LE(st.medMax, 0.002);
+}
+
 TEST(Accuracy, BunnyRawScansAgainstZipperedMesh) {
   ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
