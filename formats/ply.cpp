@@ -193,7 +193,9 @@ class PlyParser {
     }
     if (minBytes > static_cast<long double>(bodyBytes)) {
       std::string detail;
-      for (const auto& e : hdr_.elements) detail += " " + formatCount(e.count) + " " + e.name;
+      for (const auto& e : hdr_.elements) {
+        detail.append(" ").append(formatCount(e.count)).append(" ").append(e.name);
+      }
       return Status::badInput(path_ + ": header declares" + detail + " but the body has only " +
                               std::to_string(bodyBytes) + " bytes (file truncated or header corrupt)");
     }

@@ -75,7 +75,7 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
   std::vector<uint8_t> covered(size_t(W) * H, 0);
   const Quadric trend = fitQuadric(g, u, v, w, n);
   const double ru = coverageRadius / g.du, rv = coverageRadius / g.dv;
-  const int riu = static_cast<int>(std::ceil(ru)), riv = static_cast<int>(std::ceil(rv));
+  const int riv = static_cast<int>(std::ceil(rv));
   // Coverage disks are stamped row by row: one square root per row, then a fill.
   // Splat: bilinear weights onto the four nearest texel centres (the finest level).
   for (size_t s = 0; s < n; ++s) {

@@ -76,7 +76,9 @@ TEST(PullPush, HolesLargerThanThresholdStayEmpty) {
       const double uu = g.u0 + (i + 0.5) * g.du, vv = g.v0 + (j + 0.5) * g.dv;
       const double r = std::sqrt(uu * uu + vv * vv);
       const uint16_t k = out.heights[size_t(j) * g.width + i];
-      if (r < 0.3 - radius - 0.01) EXPECT_EQ(k, 0) << "hole texel " << i << "," << j << " filled";
+      if (r < 0.3 - radius - 0.01) {
+        EXPECT_EQ(k, 0) << "hole texel " << i << "," << j << " filled";
+      }
       if (r > 0.3 + 0.01) {
         ASSERT_NE(k, 0) << "texel " << i << "," << j;
         EXPECT_NEAR(decodeHeight(k, g.wMin, g.wMax), 0.01, 1e-5);
@@ -123,8 +125,12 @@ TEST(Raster, TriangleHeightsAreExact) {
         ++covered;
         EXPECT_NEAR(decodeHeight(k, g.wMin, g.wMax), plane(uu, vv), 2e-6);
       }
-      if (inside && uu > -0.88 && vv > -0.88 && uu + vv < -0.02) EXPECT_NE(k, 0);
-      if (!inside && (uu < -0.92 || vv < -0.92 || uu + vv > 0.02)) EXPECT_EQ(k, 0);
+      if (inside && uu > -0.88 && vv > -0.88 && uu + vv < -0.02) {
+        EXPECT_NE(k, 0);
+      }
+      if (!inside && (uu < -0.92 || vv < -0.92 || uu + vv > 0.02)) {
+        EXPECT_EQ(k, 0);
+      }
     }
   EXPECT_GT(covered, 700u);
 }
