@@ -8,6 +8,11 @@
 
 #include "../common/test_util.h"
 #include "atlas/pack_file.h"
+#include "formats/ply.h"
+#include "preprocess/normals.h"
+
+#include <Eigen/Geometry>
+#include <flann/flann.hpp>
 
 namespace sa {
 namespace {
@@ -118,6 +123,78 @@ TEST(PipelineReal, DragonMeshTakesTheTrianglePath) {
   ASSERT_TRUE(packInput(*in, d.file("p.hfa"), asPoints, nullptr, pts).isOk());
   EXPECT_FALSE(pts.fromTriangles);
   EXPECT_TRUE(pts.normalsEstimated);
+}
+
+}  // namespace
+}  // namespace sa
+
+namespace sa {
+namespace {
+
+struct MeshCollect : BatchSink {
+  std::vector<double> xyz;
+  std::vector<uint32_t> tris;
+  std::vector<uint16_t> scan;
+  Status onPoints(const PointBatch& b) override {
+    for (size_t i = 0; i < b.size(); ++i) {
+      xyz.insert(xyz.end(), {b.x[i], b.y[i], b.z[i]});
+      scan.push_back(b.scan.empty() ? 0 : b.scan[i]);
+    }
+    return Status::ok();
+  }
+  Status onTriangles(const uint32_t* idx, size_t n) override {
+    tris.insert(tris.end(), idx, idx + 3 * n);
+    return Status::ok();
+  }
+};
+
+// Estimated normals of the raw bunny scans, oriented toward each scan's scanner, must agree
+// in sign with the normals of Stanford's reconstruction at the nearest vertex.
+TEST(NormalsReal, BunnyScanNormalsFaceOutward) {
+  auto input = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
+  ASSERT_TRUE(input.isOk());
+  MeshCollect scans;
+  ASSERT_TRUE(input->stream(scans, false).isOk());
+  // Every 7th point keeps the test quick; normals are estimated over all of them.
+  const size_t n = scans.xyz.size() / 3;
+  std::vector<float> nrm(3 * n);
+  NormalOrientation orient;
+  orient.towardScanner = input->towardScanner();
+  orient.scan = scans.scan.data();
+  orient.scanStride = sizeof(uint16_t);
+  estimateNormals(scans.xyz.data(), n, 24, orient, nrm.data());
+
+  MeshCollect ref;
+  ASSERT_TRUE(readPly(test::sharedData("stanford_bunny/reconstruction/bun_zipper.ply"), {}, ref).isOk());
+  std::vector<double> refN(ref.xyz.size(), 0.0);
+  for (size_t t = 0; t < ref.tris.size(); t += 3) {
+    const Eigen::Vector3d a(&ref.xyz[3 * ref.tris[t]]), b(&ref.xyz[3 * ref.tris[t + 1]]), c(&ref.xyz[3 * ref.tris[t + 2]]);
+    const Eigen::Vector3d fn = (b - a).cross(c - a);
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < 3; ++j) refN[3 * ref.tris[t + k] + j] += fn[j];
+  }
+  flann::Matrix<double> data(ref.xyz.data(), ref.xyz.size() / 3, 3);
+  flann::Index<flann::L2_Simple<double>> index(data, flann::KDTreeSingleIndexParams(10));
+  index.buildIndex();
+  size_t agree = 0, total = 0;
+  for (size_t i = 0; i < n; i += 7) {
+    const Eigen::Vector3d e(nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]);
+    if (e.norm() < 0.5) continue;
+    int idx;
+    double dist;
+    flann::Matrix<int> mi(&idx, 1, 1);
+    flann::Matrix<double> md(&dist, 1, 1);
+    flann::Matrix<double> mq(&scans.xyz[3 * i], 1, 3);
+    index.knnSearch(mq, mi, md, 1, flann::SearchParams(64));
+    if (std::sqrt(dist) > 1e-3) continue;  // scanner junk far from the reconstruction
+    const Eigen::Vector3d r(&refN[3 * size_t(idx)]);
+    ++total;
+    agree += e.dot(r) > 0;
+  }
+  std::printf("bunny: %zu of %zu estimated normals face the same side as bun_zipper's (%.2f%%)\n", agree, total,
+              100.0 * agree / total);
+  EXPECT_GT(total, 40000u);
+  EXPECT_GE(double(agree), 0.97 * double(total));
 }
 
 }  // namespace

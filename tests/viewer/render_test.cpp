@@ -188,5 +188,51 @@ TEST_F(RenderTest, GeoreferencedOffsetRendersTheSame) {
   EXPECT_LE(maxDiff, 1e-4 * diag);
 }
 
+// Scan colours travel from the PLY through pull-push into the colour pages and the image.
+TEST_F(RenderTest, ScanColoursReachTheImage) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  std::string ply = "ply\nformat ascii 1.0\nelement vertex " + std::to_string(pts.size()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\n"
+                    "property float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+  for (size_t i = 0; i < pts.size(); ++i) {
+    const bool top = pts[i].y() > 0;
+    ply += std::to_string(pts[i].x()) + " " + std::to_string(pts[i].y()) + " " + std::to_string(pts[i].z()) + " " +
+           std::to_string(nrm[i].x()) + " " + std::to_string(nrm[i].y()) + " " + std::to_string(nrm[i].z()) +
+           (top ? " 230 40 30\n" : " 30 40 230\n");
+  }
+  test::writeText(dir_.file("c.ply"), ply);
+  auto in = InputSet::open({dir_.file("c.ply")});
+  ASSERT_TRUE(in.isOk());
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, dir_.file("c.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_TRUE(sum.hasColor);
+  PackReader p;
+  ASSERT_TRUE(p.open(dir_.file("c.hfa")).isOk());
+  ASSERT_TRUE(p.hasColor());
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  Camera cam;
+  cam.eye = Eigen::Vector3d(0, 3.5, 0.01);  // from above: the red hemisphere
+  cam.target = Eigen::Vector3d::Zero();
+  cam.width = cam.height = 64;
+  FrameResult fr;
+  ASSERT_TRUE(r.render(cam, RenderSettings{}, fr, false).isOk());
+  size_t red = 0, blue = 0;
+  for (size_t i = 0; i < fr.color.rgba.size(); i += 4) {
+    const int R = fr.color.rgba[i], B = fr.color.rgba[i + 2];
+    red += R > 2 * B && R > 60;
+    blue += B > 2 * R && B > 60;
+  }
+  EXPECT_GT(red, 64u * 64 / 4);
+  EXPECT_EQ(blue, 0u);
+  RenderSettings plain;
+  plain.useColor = false;
+  ASSERT_TRUE(r.render(cam, plain, fr, false).isOk());
+  red = 0;
+  for (size_t i = 0; i < fr.color.rgba.size(); i += 4) red += fr.color.rgba[i] > 2 * fr.color.rgba[i + 2];
+  EXPECT_EQ(red, 0u);  // --no-color: the plain base colour
+}
+
 }  // namespace
 }  // namespace sa
