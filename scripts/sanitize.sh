@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Builds the tests with AddressSanitizer + UndefinedBehaviorSanitizer into build-asan/ and runs
+# them. Leak checking is on except for the viewer tests (Mesa's llvmpipe keeps allocations
+# alive until process exit).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/deps.sh
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSCANATLAS_SANITIZE=ON >/dev/null
+cmake --build build-asan -j"${JOBS:-2}"
+cd build-asan
+export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
+ASAN_OPTIONS=detect_leaks=1 ctest --output-on-failure -j"${JOBS:-2}" -E '^(RenderTest|Accuracy)\.'
+ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure -j"${JOBS:-2}" -R '^(RenderTest|Accuracy)\.'
