@@ -5,6 +5,7 @@
 #include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/view_setup.h"
 #include "viewer/egl_context.h"
 #include "viewer/renderer.h"
 
@@ -20,6 +21,7 @@ const char* kHelp =
     "\n"
     "camera (one of):\n"
     "  --orbit N              N views around the bounding box: OUT_0.png .. OUT_{N-1}.png\n"
+    "  --path FILE            the cameras of a camera-path JSON file (one image each, as --orbit)\n"
     "  --eye X,Y,Z --target X,Y,Z [--up X,Y,Z]   one view (default: looking at the centre)\n"
     "  --fov DEG              vertical field of view (default 40)\n"
     "  --up X,Y,Z             up direction, also the orbit axis (default 0,1,0)\n"
@@ -32,6 +34,8 @@ const char* kHelp =
     "  --iterations N         linear ray-march steps per height field (default 12)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
+    "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
+    "                         turn off what a frame skips by default (see scanatlas bench)\n"
     "  --background R,G,B     background colour, 0..1 (default 0.1,0.1,0.12)\n"
     "  --json                 print per-view frame times as JSON on stdout\n"
     "  -q, --quiet            print nothing but errors\n";
@@ -46,9 +50,10 @@ std::string indexed(const std::string& path, int i) {
 int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "orbit", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
+                     {"output", "orbit", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
                       "background"},
-                     {"no-color", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+                     {"no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
+                      "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
     return 0;
@@ -59,26 +64,9 @@ int cmdRender(int argc, char** argv) {
   PackReader pack;
   s = pack.open(a.positionals()[0]);
   if (!s) return reportError(s);
-  const PackMeta& m = pack.meta();
-  const Eigen::Vector3d origin(m.origin[0], m.origin[1], m.origin[2]);
-  const Eigen::Vector3d bmin = origin + Eigen::Vector3d(m.boundsMin[0], m.boundsMin[1], m.boundsMin[2]);
-  const Eigen::Vector3d bmax = origin + Eigen::Vector3d(m.boundsMax[0], m.boundsMax[1], m.boundsMax[2]);
-
-  Camera base;
-  base.width = base.height = 1024;
-  if (a.has("size")) s = parseWxH("size", a.get("size"), base.width, base.height);
+  std::vector<Camera> cams;
+  s = camerasFromArgs(a, pack, 0, 1024, cams);
   if (!s) return reportError(s);
-  if (a.has("fov")) {
-    auto v = parseNumber("fov", a.get("fov"));
-    if (!v) return reportError(v.status());
-    base.fovDeg = *v;
-  }
-  if (a.has("up")) {
-    auto v = parseVec3("up", a.get("up"));
-    if (!v) return reportError(v.status());
-    if (v->norm() == 0) return reportError(Status::badInput("--up must not be zero"));
-    base.up = v->normalized();
-  }
   RenderSettings rs;
   if (a.has("iterations")) {
     auto v = parseInt("iterations", a.get("iterations"), 1, 1024);
@@ -96,33 +84,11 @@ int cmdRender(int argc, char** argv) {
     for (int i = 0; i < 3; ++i) rs.background[i] = float(std::clamp((*v)[i], 0.0, 1.0));
   }
   rs.useColor = !a.flag("no-color");
-
-  std::vector<Camera> cams;
-  if (a.has("orbit")) {
-    auto n = parseInt("orbit", a.get("orbit"), 1, 100000);
-    if (!n) return reportError(n.status());
-    if (a.has("eye")) return reportError(Status::badInput("render: use either --orbit or --eye, not both"));
-    cams = orbitCameras(bmin, bmax, static_cast<int>(*n), base.up, base.fovDeg, base.width, base.height);
-  } else {
-    Camera c = base;
-    c.target = (bmin + bmax) / 2;
-    if (a.has("target")) {
-      auto v = parseVec3("target", a.get("target"));
-      if (!v) return reportError(v.status());
-      c.target = *v;
-    }
-    if (a.has("eye")) {
-      auto v = parseVec3("eye", a.get("eye"));
-      if (!v) return reportError(v.status());
-      c.eye = *v;
-    } else {
-      c = orbitCameras(bmin, bmax, 1, base.up, base.fovDeg, base.width, base.height)[0];
-      if (a.has("target")) c.target = *parseVec3("target", a.get("target"));
-    }
-    s = c.validate();
-    if (!s) return reportError(s);
-    cams.push_back(c);
-  }
+  rs.cull.frustum = !a.flag("no-frustum-cull");
+  rs.cull.backfaceCull = !a.flag("no-backface-cull");
+  rs.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
+  rs.cull.subpixelSplats = !a.flag("no-splats");
+  rs.cull.frontToBack = !a.flag("no-sort");
   EglContext ctx;
   s = ctx.init();
   if (!s) return reportError(s);

@@ -17,6 +17,8 @@ const char* kUsage =
     "  pack    convert scans (PLY, Stanford .conf scan sets) into a pack file (.hfa)\n"
     "  render  render views of a pack headless to PNG (and depth to PFM)\n"
     "  info    describe a pack: cells, levels, texels, bytes, bounds, timings\n"
+    "  bench   frame times over a camera path, per mode and setting (GPU and CPU time, boxes, fragments)\n"
+    "  eval    image error against a reference mesh or scan set, with frame times; trade-off plot\n"
     "\n"
     "Run 'scanatlas <command> --help' for a command's options.\n";
 
@@ -65,6 +67,8 @@ int main(int argc, char** argv) {
   if (cmd == "pack") return sa::cmdPack(argc - 2, argv + 2);
   if (cmd == "render") return sa::cmdRender(argc - 2, argv + 2);
   if (cmd == "info") return sa::cmdInfo(argc - 2, argv + 2);
+  if (cmd == "bench") return sa::cmdBench(argc - 2, argv + 2);
+  if (cmd == "eval") return sa::cmdEval(argc - 2, argv + 2);
   std::fprintf(stderr, "scanatlas: unknown command '%s'\n\n%s", cmd.c_str(), kUsage);
   return 2;
 }

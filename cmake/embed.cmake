@@ -1,4 +1,4 @@
-# Writes OUT: a C++ file defining sa::embeddedShader(name) over every file in FILES.
+# Writes OUT: a C++ file defining sa::FUNC(name) over every file in FILES.
 separate_arguments(FILES)
 set(body "#include <cstring>\n#include <string_view>\nnamespace sa {\nnamespace {\nstruct Entry { const char* name; const char* text; };\nconst Entry kShaders[] = {\n")
 foreach(f ${FILES})
@@ -6,6 +6,6 @@ foreach(f ${FILES})
   file(READ ${f} text)
   set(body "${body}  {\"${name}\", R\"SAEMBED(${text})SAEMBED\"},\n")
 endforeach()
-set(body "${body}};\n}  // namespace\nconst char* embeddedShader(std::string_view name) {\n  for (const Entry& e : kShaders) if (name == e.name) return e.text;\n  return nullptr;\n}\n}  // namespace sa\n")
+set(body "${body}};\n}  // namespace\nconst char* ${FUNC}(std::string_view name) {\n  for (const Entry& e : kShaders) if (name == e.name) return e.text;\n  return nullptr;\n}\n}  // namespace sa\n")
 file(WRITE ${OUT}.tmp "${body}")
 file(RENAME ${OUT}.tmp ${OUT})

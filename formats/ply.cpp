@@ -208,6 +208,8 @@ class PlyParser {
         SA_RETURN_IF_ERROR(readVertices(e));
       } else if (opt_.readFaces && (e.name == "face" || e.name == "tristrips")) {
         SA_RETURN_IF_ERROR(readFaces(e, e.name == "tristrips"));
+      } else if (opt_.rangeGridTriangles && e.name == "range_grid") {
+        SA_RETURN_IF_ERROR(readRangeGrid(e));
       } else {
         SA_RETURN_IF_ERROR(skipElement(e));
       }
@@ -405,6 +407,60 @@ class PlyParser {
         }
         SA_RETURN_IF_ERROR(emitTriangles(tris, false));
       }
+    }
+    return emitTriangles(tris, true);
+  }
+
+  // Grid entries are row-major with num_cols columns: each is an empty list (no sample) or
+  // one vertex index.
+  Status readRangeGrid(const PlyElement& e) {
+    uint64_t cols = 0;
+    for (const auto& info : hdr_.objInfo) {
+      std::istringstream is(info);
+      std::string key;
+      uint64_t v;
+      if (is >> key >> v && key == "num_cols") cols = v;
+    }
+    if (cols == 0 || cols > (1u << 20)) return Status::badInput(path_ + ": range_grid without a valid 'obj_info num_cols'");
+    if (e.properties.size() != 1 || !e.properties[0].isList)
+      return Status::badInput(path_ + ": range_grid must have one list property");
+    std::vector<int64_t> prev(cols, -1), cur(cols, -1);
+    std::vector<uint32_t> tris;
+    for (uint64_t k = 0; k < e.count; ++k) {
+      const uint64_t col = k % cols;
+      if (col == 0 && k > 0) {
+        std::swap(prev, cur);
+        std::fill(cur.begin(), cur.end(), -1);
+      }
+      uint64_t cnt;
+      SA_RETURN_IF_ERROR(readListCount(e.properties[0], cnt, "range_grid"));
+      int64_t idx = -1;
+      for (uint64_t j = 0; j < cnt; ++j) {
+        double v;
+        SA_RETURN_IF_ERROR(readValue(e.properties[0].type, v, "range_grid index"));
+        if (j == 0) idx = static_cast<int64_t>(v);
+      }
+      if (idx >= static_cast<int64_t>(hdr_.vertexCount) || idx < -1)
+        return Status::badInput(path_ + ": range_grid entry " + std::to_string(k) + " refers to vertex " +
+                                std::to_string(idx) + " of " + std::to_string(hdr_.vertexCount));
+      cur[col] = idx;
+      if (k >= cols && col > 0) {
+        const int64_t a = prev[col - 1], b = prev[col], c = cur[col - 1], d = cur[col];
+        auto tri = [&](int64_t x, int64_t y, int64_t z) {
+          if (x < 0 || y < 0 || z < 0) return;
+          tris.insert(tris.end(), {uint32_t(x), uint32_t(y), uint32_t(z)});
+        };
+        if (a >= 0 && b >= 0 && c >= 0 && d >= 0) {
+          tri(a, c, b);
+          tri(b, c, d);
+        } else {  // three of the four: one triangle
+          if (d < 0) tri(a, c, b);
+          if (a < 0) tri(b, c, d);
+          if (b < 0) tri(a, c, d);
+          if (c < 0) tri(a, d, b);
+        }
+      }
+      SA_RETURN_IF_ERROR(emitTriangles(tris, false));
     }
     return emitTriangles(tris, true);
   }

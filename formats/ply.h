@@ -40,6 +40,10 @@ struct PlyHeader {
 struct PlyReadOptions {
   size_t batchPoints = kDefaultBatchPoints;
   bool readFaces = true;
+  // Range scans (Stanford/Cyberware PLY): triangulate the `range_grid` element, 2 triangles
+  // per 2x2 block of grid cells that all hold a sample, using the `num_cols` obj_info.
+  // Triangles are delivered through onTriangles; consumers filter long edges.
+  bool rangeGridTriangles = false;
 };
 
 // Parses only the header (cheap) and validates the counts against the file size.

@@ -72,6 +72,9 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths) {
   InputSet set;
   if (paths.empty()) return Status::badInput("no input files given");
   for (const auto& path : paths) {
+    std::error_code ec;
+    const auto abs = std::filesystem::absolute(path, ec);
+    set.sourcePaths_.push_back(ec ? path : abs.lexically_normal().string());
     const std::string ext = lowerExtension(path);
     if (ext == ".conf") {
       auto scans = readConf(path);

@@ -33,6 +33,8 @@ class InputSet {
   // Per scan: direction from the surface toward the scanner (aligned coordinates).
   const std::vector<Eigen::Vector3d>& towardScanner() const { return towardScanner_; }
   const std::vector<std::string>& warnings() const { return warnings_; }
+  // The paths the user named (absolute), before scan sets were expanded.
+  const std::vector<std::string>& sourcePaths() const { return sourcePaths_; }
 
   // Streams every file in order. Point batches carry aligned positions, the scan index when
   // the input is a scan set, normals only when every file has them, and colours when any
@@ -43,6 +45,7 @@ class InputSet {
   std::vector<InputFile> files_;
   std::vector<Eigen::Vector3d> towardScanner_;
   std::vector<std::string> warnings_;
+  std::vector<std::string> sourcePaths_;
 };
 
 }  // namespace sa

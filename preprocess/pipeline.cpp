@@ -261,9 +261,10 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   meta.maxDepth = static_cast<uint32_t>(opt.octree.maxDepth);
   meta.chunkCount = sum.chunks;
   meta.texelsUsed = sum.texels;
-  std::string note = "sources:";
-  for (const auto& f : input.files()) note += " " + f.path;
-  note += "\ncommand: " + opt.commandLine + "\n";
+  // NOTE (FORMAT.md): one "source: <path>" line per input, then the command line.
+  std::string note;
+  for (const auto& f : input.sourcePaths()) note += "source: " + f + "\n";
+  note += "command: " + opt.commandLine + "\n";
   PackWriter writer;
   SA_RETURN_IF_ERROR(writer.open(outPath, meta, records, note));
   const bool writeColor = (meta.flags & kPackHasColor) != 0;

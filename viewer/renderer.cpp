@@ -12,12 +12,18 @@
 namespace sa {
 namespace {
 
-// Expands `#include "name"` lines with the embedded files (one level is all we use).
-std::string shaderSource(const std::string& name) {
+#ifndef GL_FRAGMENT_SHADER_INVOCATIONS_ARB
+#define GL_FRAGMENT_SHADER_INVOCATIONS_ARB 0x82F4
+#endif
+
+// Expands `#include "name"` lines with the embedded files and inserts `defines` after the
+// #version line.
+std::string shaderSource(const std::string& name, const std::string& defines) {
   const char* text = embeddedShader(name);
   if (!text) return {};
   std::istringstream in(text);
   std::string line, out;
+  bool first = true;
   while (std::getline(in, line)) {
     if (line.rfind("#include \"", 0) == 0) {
       const std::string inc = line.substr(10, line.find('"', 10) - 10);
@@ -27,12 +33,14 @@ std::string shaderSource(const std::string& name) {
     } else {
       out += line + "\n";
     }
+    if (first) out += defines;
+    first = false;
   }
   return out;
 }
 
-Status compile(GLenum type, const std::string& name, GLuint& shader) {
-  const std::string src = shaderSource(name);
+Status compile(GLenum type, const std::string& name, const std::string& defines, GLuint& shader) {
+  const std::string src = shaderSource(name, defines);
   if (src.empty()) return Status::internal("shader " + name + " is not embedded");
   shader = glCreateShader(type);
   const char* p = src.c_str();
@@ -48,6 +56,26 @@ Status compile(GLenum type, const std::string& name, GLuint& shader) {
   return Status::ok();
 }
 
+Status link(const std::string& vs, const std::string& fs, const std::string& defines, GLuint& program) {
+  GLuint v = 0, f = 0;
+  SA_RETURN_IF_ERROR(compile(GL_VERTEX_SHADER, vs, defines, v));
+  SA_RETURN_IF_ERROR(compile(GL_FRAGMENT_SHADER, fs, defines, f));
+  program = glCreateProgram();
+  glAttachShader(program, v);
+  glAttachShader(program, f);
+  glLinkProgram(program);
+  glDeleteShader(v);
+  glDeleteShader(f);
+  GLint ok = 0;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char log[4096];
+    glGetProgramInfoLog(program, sizeof(log), nullptr, log);
+    return Status::internal("shader program " + vs + " + " + fs + " failed to link:\n" + log);
+  }
+  return Status::ok();
+}
+
 struct GpuCell {
   float originHi[4], originLo[4], u[4], v[4], w[4], boxUV[4], boxW[4];
   int32_t tile[4];
@@ -59,79 +87,108 @@ void splitDouble(double d, float& hi, float& lo) {
   lo = static_cast<float>(d - static_cast<double>(hi));
 }
 
+size_t alignUp(size_t v, GLint a) { return (v + size_t(a) - 1) / size_t(a) * size_t(a); }
+
+bool hasExtension(const char* name) {
+  GLint n = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &n);
+  for (GLint i = 0; i < n; ++i)
+    if (!std::strcmp(reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, GLuint(i))), name)) return true;
+  return false;
+}
+
 }  // namespace
 
+const char* modeName(RenderMode m) { return m == RenderMode::kPoints ? "points" : "parallax"; }
+
+Result<RenderMode> parseMode(const std::string& name) {
+  if (name == "parallax") return RenderMode::kParallax;
+  if (name == "points") return RenderMode::kPoints;
+  return Status::badInput("unknown mode '" + name + "' (modes: parallax, points)");
+}
+
 struct Renderer::Gl {
-  GLuint program = 0, vao = 0, ssbo = 0, heightTex = 0, colorTex = 0, dummyColor = 0;
-  GLuint fbo = 0, colorRb = 0, depthRb = 0, linearRb = 0;
+  GLuint front = 0, inside = 0, splat = 0, points = 0;  // programs
+  GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
+  GLsizeiptr itemCapacity = 0;
+  GLuint heightTex = 0, colorTex = 0;
+  GLuint fbo = 0, colorRb = 0, depthRb = 0, linearRb = 0, normalRb = 0;
+  GLuint timeQuery = 0, fragQuery = 0;
+  GLenum fragTarget = GL_SAMPLES_PASSED;
+  GLint ssboAlign = 256;  // GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT
   int fbW = 0, fbH = 0;
   ~Gl() {
-    if (program) glDeleteProgram(program);
-    if (vao) glDeleteVertexArrays(1, &vao);
-    if (ssbo) glDeleteBuffers(1, &ssbo);
-    GLuint tex[] = {heightTex, colorTex, dummyColor};
-    glDeleteTextures(3, tex);
+    for (GLuint p : {front, inside, splat, points})
+      if (p) glDeleteProgram(p);
+    GLuint vaos[] = {vao, pointVao};
+    glDeleteVertexArrays(2, vaos);
+    GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
+    glDeleteBuffers(3, bufs);
+    GLuint tex[] = {heightTex, colorTex};
+    glDeleteTextures(2, tex);
     if (fbo) glDeleteFramebuffers(1, &fbo);
-    GLuint rb[] = {colorRb, depthRb, linearRb};
-    glDeleteRenderbuffers(3, rb);
+    GLuint rb[] = {colorRb, depthRb, linearRb, normalRb};
+    glDeleteRenderbuffers(4, rb);
+    GLuint q[] = {timeQuery, fragQuery};
+    glDeleteQueries(2, q);
   }
 };
 
 Renderer::Renderer() = default;
 Renderer::~Renderer() = default;
 
+double Renderer::nearPlane() const { return std::max((boundsMax_ - boundsMin_).norm() / 2, 1e-12) * 1e-5; }
+
 Status Renderer::init(const PackReader& pack) {
   gl_ = std::make_unique<Gl>();
+  Gl& g = *gl_;
   const PackMeta& m = pack.meta();
   origin_ = Eigen::Vector3d(m.origin[0], m.origin[1], m.origin[2]);
   boundsMin_ = Eigen::Vector3d(m.boundsMin[0], m.boundsMin[1], m.boundsMin[2]);
   boundsMax_ = Eigen::Vector3d(m.boundsMax[0], m.boundsMax[1], m.boundsMax[2]);
   cellCount_ = m.cellCount;
   hasColor_ = pack.hasColor();
-  GLuint vs = 0, fs = 0;
-  SA_RETURN_IF_ERROR(compile(GL_VERTEX_SHADER, "box.vert", vs));
-  SA_RETURN_IF_ERROR(compile(GL_FRAGMENT_SHADER, "parallax.frag", fs));
-  gl_->program = glCreateProgram();
-  glAttachShader(gl_->program, vs);
-  glAttachShader(gl_->program, fs);
-  glLinkProgram(gl_->program);
-  glDeleteShader(vs);
-  glDeleteShader(fs);
-  GLint ok = 0;
-  glGetProgramiv(gl_->program, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    char log[4096];
-    glGetProgramInfoLog(gl_->program, sizeof(log), nullptr, log);
-    return Status::internal(std::string("shader program failed to link:\n") + log);
-  }
-  glCreateVertexArrays(1, &gl_->vao);
+  spacing_ = m.sampleSpacing;
+  culler_ = std::make_unique<CellCuller>(pack.cells());
+  SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n", g.front));
+  SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "", g.inside));
+  SA_RETURN_IF_ERROR(link("splat.vert", "splat.frag", "", g.splat));
+  SA_RETURN_IF_ERROR(link("points.vert", "points.frag", "", g.points));
+  glCreateVertexArrays(1, &g.vao);
+  // glGenQueries, not glCreateQueries: Mesa rejects the pipeline-statistics target there.
+  glGenQueries(1, &g.timeQuery);
+  glGenQueries(1, &g.fragQuery);
+  g.fragTarget = hasExtension("GL_ARB_pipeline_statistics_query") ? GL_FRAGMENT_SHADER_INVOCATIONS_ARB : GL_SAMPLES_PASSED;
 
   std::vector<GpuCell> cells(m.cellCount);
   auto src = pack.cells();
   for (uint32_t i = 0; i < m.cellCount; ++i) {
     const CellRecord& c = src[i];
-    GpuCell& g = cells[i];
-    std::memset(&g, 0, sizeof(g));
+    GpuCell& gc = cells[i];
+    std::memset(&gc, 0, sizeof(gc));
     for (int a = 0; a < 3; ++a) {
-      splitDouble(c.origin[a], g.originHi[a], g.originLo[a]);
-      g.u[a] = float(c.u[a]);
-      g.v[a] = float(c.v[a]);
-      g.w[a] = float(c.w[a]);
+      splitDouble(c.origin[a], gc.originHi[a], gc.originLo[a]);
+      gc.u[a] = float(c.u[a]);
+      gc.v[a] = float(c.v[a]);
+      gc.w[a] = float(c.w[a]);
     }
-    for (int a = 0; a < 4; ++a) g.boxUV[a] = float(c.box[a]);
-    g.boxW[0] = float(c.box[4]);
-    g.boxW[1] = float(c.box[5]);
-    g.boxW[2] = float(c.tileW);
-    g.boxW[3] = float(c.tileH);
-    g.tile[0] = int32_t(c.page);
-    g.tile[1] = int32_t(c.tileX);
-    g.tile[2] = int32_t(c.tileY);
-    g.tile[3] = c.flags;
+    for (int a = 0; a < 4; ++a) gc.boxUV[a] = float(c.box[a]);
+    gc.boxW[0] = float(c.box[4]);
+    gc.boxW[1] = float(c.box[5]);
+    gc.boxW[2] = float(c.tileW);
+    gc.boxW[3] = float(c.tileH);
+    gc.tile[0] = int32_t(c.page);
+    gc.tile[1] = int32_t(c.tileX);
+    gc.tile[2] = int32_t(c.tileY);
+    gc.tile[3] = c.flags;
   }
-  glCreateBuffers(1, &gl_->ssbo);
-  glNamedBufferStorage(gl_->ssbo, GLsizeiptr(std::max<size_t>(1, cells.size()) * sizeof(GpuCell)),
+  glCreateBuffers(1, &g.cellBuf);
+  glNamedBufferStorage(g.cellBuf, GLsizeiptr(std::max<size_t>(1, cells.size()) * sizeof(GpuCell)),
                        cells.empty() ? nullptr : cells.data(), 0);
   gpuBytes_ = cells.size() * sizeof(GpuCell);
+  glCreateBuffers(1, &g.itemBuf);
+  glGetIntegerv(GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT, &g.ssboAlign);
+  g.ssboAlign = std::max(g.ssboAlign, 1);
 
   GLint maxLayers = 0, maxSize = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &maxLayers);
@@ -140,119 +197,223 @@ Status Renderer::init(const PackReader& pack) {
     return Status::internal(pack.path() + ": atlas needs " + std::to_string(m.pageCount) + " layers of " +
                             std::to_string(m.pageSize) + "^2 but the GL allows " + std::to_string(maxLayers) +
                             " layers of " + std::to_string(maxSize) + "^2");
-  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &gl_->heightTex);
-  glTextureStorage3D(gl_->heightTex, 1, GL_R16UI, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.heightTex);
+  glTextureStorage3D(g.heightTex, 1, GL_R16UI, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
   for (uint32_t p = 0; p < m.pageCount; ++p)
-    glTextureSubImage3D(gl_->heightTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1,
+    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1,
                         GL_RED_INTEGER, GL_UNSIGNED_SHORT, pack.heightPage(p));
-  glTextureParameteri(gl_->heightTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-  glTextureParameteri(gl_->heightTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTextureParameteri(g.heightTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(g.heightTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 2;
-  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &gl_->colorTex);
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.colorTex);
   if (hasColor_) {
-    glTextureStorage3D(gl_->colorTex, 1, GL_RGBA8, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
+    glTextureStorage3D(g.colorTex, 1, GL_RGBA8, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
     for (uint32_t p = 0; p < m.pageCount; ++p)
-      glTextureSubImage3D(gl_->colorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
+      glTextureSubImage3D(g.colorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
                           GL_UNSIGNED_BYTE, pack.colorPage(p));
     gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 4;
   } else {
     const uint8_t white[4] = {255, 255, 255, 255};
-    glTextureStorage3D(gl_->colorTex, 1, GL_RGBA8, 1, 1, 1);
-    glTextureSubImage3D(gl_->colorTex, 0, 0, 0, 0, 1, 1, 1, GL_RGBA, GL_UNSIGNED_BYTE, white);
+    glTextureStorage3D(g.colorTex, 1, GL_RGBA8, 1, 1, 1);
+    glTextureSubImage3D(g.colorTex, 0, 0, 0, 0, 1, 1, 1, GL_RGBA, GL_UNSIGNED_BYTE, white);
   }
-  glTextureParameteri(gl_->colorTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-  glTextureParameteri(gl_->colorTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTextureParameteri(g.colorTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(g.colorTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   return Status::ok();
 }
 
-Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult& out, bool readDepth) {
+Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing) {
+  Gl& g = *gl_;
+  pointCount_ = xyz.size() / 3;
+  if (rgba.size() != pointCount_ * 4) return Status::internal("setPoints: colour count does not match");
+  spacing_ = spacing > 0 ? spacing : spacing_;
+  // Interleaved: 12 bytes position + 4 bytes colour.
+  std::vector<uint8_t> inter(pointCount_ * 16);
+  for (uint64_t i = 0; i < pointCount_; ++i) {
+    std::memcpy(&inter[i * 16], &xyz[3 * i], 12);
+    std::memcpy(&inter[i * 16 + 12], &rgba[4 * i], 4);
+  }
+  if (!g.pointBuf) glCreateBuffers(1, &g.pointBuf);
+  glNamedBufferData(g.pointBuf, GLsizeiptr(std::max<size_t>(16, inter.size())), inter.data(), GL_STATIC_DRAW);
+  if (!g.pointVao) {
+    glCreateVertexArrays(1, &g.pointVao);
+    glVertexArrayVertexBuffer(g.pointVao, 0, g.pointBuf, 0, 16);
+    glEnableVertexArrayAttrib(g.pointVao, 0);
+    glVertexArrayAttribFormat(g.pointVao, 0, 3, GL_FLOAT, GL_FALSE, 0);
+    glVertexArrayAttribBinding(g.pointVao, 0, 0);
+    glEnableVertexArrayAttrib(g.pointVao, 1);
+    glVertexArrayAttribFormat(g.pointVao, 1, 4, GL_UNSIGNED_BYTE, GL_TRUE, 12);
+    glVertexArrayAttribBinding(g.pointVao, 1, 0);
+  }
+  if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading points (out of memory?)");
+  return Status::ok();
+}
+
+Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult& out, unsigned readBack) {
   SA_RETURN_IF_ERROR(cam.validate());
+  if (s.mode == RenderMode::kPoints && !hasPoints())
+    return Status::badInput("points mode: no source points loaded for this pack");
   Gl& g = *gl_;
   if (g.fbW != cam.width || g.fbH != cam.height) {
     if (g.fbo) glDeleteFramebuffers(1, &g.fbo);
-    GLuint rb[] = {g.colorRb, g.depthRb, g.linearRb};
-    glDeleteRenderbuffers(3, rb);
+    GLuint rb[] = {g.colorRb, g.depthRb, g.linearRb, g.normalRb};
+    glDeleteRenderbuffers(4, rb);
     glCreateFramebuffers(1, &g.fbo);
     glCreateRenderbuffers(1, &g.colorRb);
     glCreateRenderbuffers(1, &g.depthRb);
     glCreateRenderbuffers(1, &g.linearRb);
+    glCreateRenderbuffers(1, &g.normalRb);
     glNamedRenderbufferStorage(g.colorRb, GL_RGBA8, cam.width, cam.height);
     glNamedRenderbufferStorage(g.linearRb, GL_R32F, cam.width, cam.height);
+    glNamedRenderbufferStorage(g.normalRb, GL_RGBA16F, cam.width, cam.height);
     glNamedRenderbufferStorage(g.depthRb, GL_DEPTH_COMPONENT32F, cam.width, cam.height);
     glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, g.colorRb);
     glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT1, GL_RENDERBUFFER, g.linearRb);
+    glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT2, GL_RENDERBUFFER, g.normalRb);
     glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
-    const GLenum bufs[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
-    glNamedFramebufferDrawBuffers(g.fbo, 2, bufs);
     if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
       return Status::internal("framebuffer incomplete at " + std::to_string(cam.width) + "x" + std::to_string(cam.height));
     g.fbW = cam.width;
     g.fbH = cam.height;
   }
+  // The normal attachment is written only when asked for (eval), so bench frames do not pay.
+  const GLenum bufs[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1,
+                         (readBack & kReadNormals) ? GLenum(GL_COLOR_ATTACHMENT2) : GLenum(GL_NONE)};
+  glNamedFramebufferDrawBuffers(g.fbo, 3, bufs);
+
+  const auto t0 = std::chrono::steady_clock::now();
   // Camera relative to the pack origin, in double, then split for the GPU.
   const Eigen::Vector3d camRel = cam.eye - origin_;
   float hi[3], lo[3];
   for (int a = 0; a < 3; ++a) splitDouble(camRel[a], hi[a], lo[a]);
-  const double radius = std::max((boundsMax_ - boundsMin_).norm() / 2, 1e-12);
-  const double nearPlane = radius * 1e-5;
+  const double np = nearPlane();
   const Eigen::Matrix3f rot = cam.viewRotation().cast<float>();
-  const Eigen::Matrix4f proj = cam.projection(nearPlane).cast<float>();
+  const Eigen::Matrix4f proj = cam.projection(np).cast<float>();
   const Eigen::Vector3f fwd = cam.forward().cast<float>();
+  FrameStats& st = out.stats;
+  st = FrameStats{};
+  st.fragmentsAreInvocations = g.fragTarget == GL_FRAGMENT_SHADER_INVOCATIONS_ARB;
+  VisibleSet vis;
+  if (s.mode == RenderMode::kParallax) {
+    CullOptions co = s.cull;
+    co.maxSteps = std::max(1, s.iterations);
+    co.minSteps = std::min(co.minSteps, co.maxSteps);
+    culler_->compute(cam, camRel, np, co, vis);
+    st.submitted = vis.submitted;
+    st.culled = vis.culled;
+    st.drawn = static_cast<uint32_t>(vis.front.size() + vis.inside.size());
+    st.inside = static_cast<uint32_t>(vis.inside.size());
+    st.splats = static_cast<uint32_t>(vis.splats.size());
+    // One buffer: front items, then inside items, then splats, each list starting at an
+    // offset the SSBO binding accepts.
+    size_t bytes = 0;
+    for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+    if (GLsizeiptr(bytes) > g.itemCapacity) {
+      g.itemCapacity = GLsizeiptr(std::max<size_t>(bytes, 4096));
+      glNamedBufferData(g.itemBuf, g.itemCapacity, nullptr, GL_STREAM_DRAW);
+    }
+    size_t off = 0;
+    for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) {
+      if (!list->empty()) glNamedBufferSubData(g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)), list->data());
+      off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+    }
+  }
 
-  const auto t0 = std::chrono::steady_clock::now();
   glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
   glViewport(0, 0, cam.width, cam.height);
   glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_GREATER);
   glDepthMask(GL_TRUE);
-  glEnable(GL_CULL_FACE);
-  glCullFace(GL_FRONT);  // back faces: a camera inside a box still gets its fragments
   const float bg[4] = {s.background[0], s.background[1], s.background[2], 1.f};
   const float inf = std::numeric_limits<float>::infinity();
   const float depthInit[4] = {inf, 0, 0, 0};
+  const float zero4[4] = {0, 0, 0, 0};
   glClearNamedFramebufferfv(g.fbo, GL_COLOR, 0, bg);
   glClearNamedFramebufferfv(g.fbo, GL_COLOR, 1, depthInit);
+  if (readBack & kReadNormals) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
   const float zero = 0.f;
   glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);
-  glUseProgram(g.program);
-  glUniformMatrix3fv(glGetUniformLocation(g.program, "viewRotation"), 1, GL_FALSE, rot.data());
-  glUniformMatrix4fv(glGetUniformLocation(g.program, "projection"), 1, GL_FALSE, proj.data());
-  glUniform3fv(glGetUniformLocation(g.program, "camHi"), 1, hi);
-  glUniform3fv(glGetUniformLocation(g.program, "camLo"), 1, lo);
-  glUniform1i(glGetUniformLocation(g.program, "iterations"), std::max(1, s.iterations));
-  glUniform1i(glGetUniformLocation(g.program, "refineSteps"), std::max(0, s.refineSteps));
-  glUniform1f(glGetUniformLocation(g.program, "nearPlane"), float(nearPlane));
-  glUniform3fv(glGetUniformLocation(g.program, "viewForward"), 1, fwd.data());
-  glUniform1i(glGetUniformLocation(g.program, "useColor"), s.useColor && hasColor_ ? 1 : 0);
-  glUniform3fv(glGetUniformLocation(g.program, "baseColor"), 1, s.baseColor);
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.ssbo);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.cellBuf);
   glBindTextureUnit(0, g.heightTex);
   glBindTextureUnit(1, g.colorTex);
-  glBindVertexArray(g.vao);
-  if (cellCount_ > 0) glDrawArraysInstanced(GL_TRIANGLES, 0, 36, GLsizei(cellCount_));
+  const bool color = s.useColor && hasColor_;
+  auto common = [&](GLuint p) {
+    glUseProgram(p);
+    glUniformMatrix3fv(glGetUniformLocation(p, "viewRotation"), 1, GL_FALSE, rot.data());
+    glUniformMatrix4fv(glGetUniformLocation(p, "projection"), 1, GL_FALSE, proj.data());
+    glUniform3fv(glGetUniformLocation(p, "camHi"), 1, hi);
+    glUniform3fv(glGetUniformLocation(p, "camLo"), 1, lo);
+    glUniform1i(glGetUniformLocation(p, "refineSteps"), std::max(0, s.refineSteps));
+    glUniform1f(glGetUniformLocation(p, "nearPlane"), float(np));
+    glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, fwd.data());
+    glUniform1i(glGetUniformLocation(p, "useColor"), color ? 1 : 0);
+    glUniform3fv(glGetUniformLocation(p, "baseColor"), 1, s.baseColor);
+  };
+  glBeginQuery(GL_TIME_ELAPSED, g.timeQuery);
+  glBeginQuery(g.fragTarget, g.fragQuery);
+  if (s.mode == RenderMode::kParallax) {
+    glBindVertexArray(g.vao);
+    glEnable(GL_CULL_FACE);
+    size_t off = 0;
+    auto drawList = [&](const std::vector<DrawItem>& list, GLuint program, GLenum cullFace, GLenum prim, GLsizei verts) {
+      if (!list.empty()) {
+        common(program);
+        glCullFace(cullFace);
+        glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list.size() * sizeof(DrawItem)));
+        glDrawArraysInstanced(prim, 0, verts, GLsizei(list.size()));
+      }
+      off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
+    };
+    drawList(vis.front, g.front, GL_BACK, GL_TRIANGLES, 36);   // camera outside: front faces
+    drawList(vis.inside, g.inside, GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+    glDisable(GL_CULL_FACE);
+    drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
+  } else {
+    common(g.points);
+    const double ty = std::tan(cam.fovDeg * M_PI / 360.0);
+    glUniform1f(glGetUniformLocation(g.points, "spacingPixels"), float(spacing_ * cam.height / (2 * ty)));
+    glEnable(GL_PROGRAM_POINT_SIZE);
+    glDisable(GL_CULL_FACE);
+    glBindVertexArray(g.pointVao);
+    glDrawArrays(GL_POINTS, 0, GLsizei(pointCount_));
+    st.points = pointCount_;
+  }
+  glEndQuery(g.fragTarget);
+  glEndQuery(GL_TIME_ELAPSED);
   glFinish();
-  out.milliseconds = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  out.cellsDrawn = cellCount_;
+  st.cpuMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  GLuint64 ns = 0, frags = 0;
+  glGetQueryObjectui64v(g.timeQuery, GL_QUERY_RESULT, &ns);
+  glGetQueryObjectui64v(g.fragQuery, GL_QUERY_RESULT, &frags);
+  st.gpuMs = double(ns) / 1e6;
+  st.fragments = frags;
+  out.milliseconds = st.cpuMs;
+  out.cellsDrawn = st.drawn;
 
-  out.color.width = cam.width;
-  out.color.height = cam.height;
-  out.color.rgba.resize(size_t(cam.width) * cam.height * 4);
-  std::vector<uint8_t> rows(out.color.rgba.size());
-  glNamedFramebufferReadBuffer(g.fbo, GL_COLOR_ATTACHMENT0);
-  glPixelStorei(GL_PACK_ALIGNMENT, 1);
-  glReadPixels(0, 0, cam.width, cam.height, GL_RGBA, GL_UNSIGNED_BYTE, rows.data());
-  const size_t stride = size_t(cam.width) * 4;
-  for (int y = 0; y < cam.height; ++y)
-    std::memcpy(&out.color.rgba[size_t(y) * stride], &rows[size_t(cam.height - 1 - y) * stride], stride);
-  if (readDepth) {
-    std::vector<float> d(size_t(cam.width) * cam.height);
-    glNamedFramebufferReadBuffer(g.fbo, GL_COLOR_ATTACHMENT1);
-    glReadPixels(0, 0, cam.width, cam.height, GL_RED, GL_FLOAT, d.data());
-    out.depth.resize(d.size());
+  auto readFlipped = [&](GLenum attachment, GLenum format, GLenum type, size_t pixelBytes, void* dst) {
+    std::vector<uint8_t> rows(size_t(cam.width) * cam.height * pixelBytes);
+    glNamedFramebufferReadBuffer(g.fbo, attachment);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glReadPixels(0, 0, cam.width, cam.height, format, type, rows.data());
+    const size_t stride = size_t(cam.width) * pixelBytes;
     for (int y = 0; y < cam.height; ++y)
-      std::memcpy(&out.depth[size_t(y) * cam.width], &d[size_t(cam.height - 1 - y) * cam.width], size_t(cam.width) * 4);
+      std::memcpy(static_cast<uint8_t*>(dst) + size_t(y) * stride, &rows[size_t(cam.height - 1 - y) * stride], stride);
+  };
+  if (readBack & kReadColor) {
+    out.color.width = cam.width;
+    out.color.height = cam.height;
+    out.color.rgba.resize(size_t(cam.width) * cam.height * 4);
+    readFlipped(GL_COLOR_ATTACHMENT0, GL_RGBA, GL_UNSIGNED_BYTE, 4, out.color.rgba.data());
+  }
+  if (readBack & kReadDepth) {
+    out.depth.resize(size_t(cam.width) * cam.height);
+    readFlipped(GL_COLOR_ATTACHMENT1, GL_RED, GL_FLOAT, 4, out.depth.data());
+  }
+  if (readBack & kReadNormals) {
+    out.normals.resize(size_t(cam.width) * cam.height * 3);
+    readFlipped(GL_COLOR_ATTACHMENT2, GL_RGB, GL_FLOAT, 12, out.normals.data());
   }
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   const GLenum err = glGetError();

@@ -1,6 +1,7 @@
-// The one render core behind every front end (headless render now; window, bench and eval
-// later): uploads a pack's pages and cell table, draws the cells' boxes instanced and
-// ray-casts each height field per fragment. Needs a current OpenGL 4.5 core context.
+// The one render core behind every front end (headless render, bench, eval; the window
+// later): uploads a pack's pages and cell table, culls and orders the cells' boxes on the
+// CPU, draws them instanced and ray-casts each height field per fragment. The `points`
+// baseline draws the source points as splats. Needs a current OpenGL 4.5 core context.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -9,44 +10,74 @@
 
 #include "atlas/pack_file.h"
 #include "viewer/camera.h"
+#include "viewer/culling.h"
 #include "viewer/image_io.h"
 
 namespace sa {
 
 const char* embeddedShader(std::string_view name);  // generated at build time
 
+enum class RenderMode { kParallax, kPoints };
+const char* modeName(RenderMode m);
+Result<RenderMode> parseMode(const std::string& name);
+
 struct RenderSettings {
-  int iterations = 12;   // linear search steps
+  RenderMode mode = RenderMode::kParallax;
+  int iterations = 12;   // linear search steps (the bound when steps are adaptive)
   int refineSteps = 6;   // bisection steps after the linear search
   bool useColor = true;  // scan colour when the pack has it
   float background[3] = {0.1f, 0.1f, 0.12f};
   float baseColor[3] = {0.85f, 0.82f, 0.78f};
+  CullOptions cull;      // what a frame may skip (all on by default)
 };
 
+struct FrameStats {
+  uint32_t submitted = 0, culled = 0, drawn = 0, inside = 0, splats = 0;
+  uint64_t points = 0;         // points mode: points drawn
+  double cpuMs = 0;            // culling + submission + glFinish, wall clock
+  double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)
+  uint64_t fragments = 0;      // fragment shader invocations (or samples passed, see below)
+  bool fragmentsAreInvocations = false;
+};
+
+enum ReadBack : unsigned { kReadColor = 1, kReadDepth = 2, kReadNormals = 4 };
+
 struct FrameResult {
-  Image color;               // RGBA8, row 0 at the top
-  std::vector<float> depth;  // linear view depth, row 0 at the top, +inf where nothing was hit
-  double milliseconds = 0;   // draw + glFinish wall time
-  uint32_t cellsDrawn = 0;
+  Image color;                // RGBA8, row 0 at the top
+  std::vector<float> depth;   // linear view depth, row 0 at the top, +inf where nothing was hit
+  std::vector<float> normals; // xyz per pixel (world), zero where nothing was hit
+  FrameStats stats;
+  double milliseconds = 0;    // == stats.cpuMs
+  uint32_t cellsDrawn = 0;    // boxes ray-cast (front + inside)
 };
 
 class Renderer {
  public:
   Renderer();
   ~Renderer();
-  // Uploads the pack (the pack must outlive the renderer only during init()).
+  // Uploads the pack (the reader is needed only during init()).
   Status init(const PackReader& pack);
-  Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, bool readDepth);
+  // The points baseline: positions relative to the pack origin (xyz floats), RGBA8 colours.
+  Status setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing);
+  bool hasPoints() const { return pointCount_ > 0; }
+  Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, unsigned readBack);
+  Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, bool readDepth) {
+    return render(cam, settings, out, kReadColor | (readDepth ? kReadDepth : 0u));
+  }
   uint64_t gpuBytes() const { return gpuBytes_; }
+  uint64_t pointBytes() const { return pointCount_ * 16; }
+  double nearPlane() const;
 
  private:
   struct Gl;
   std::unique_ptr<Gl> gl_;
+  std::unique_ptr<CellCuller> culler_;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
   bool hasColor_ = false;
-  uint64_t gpuBytes_ = 0;
+  uint64_t gpuBytes_ = 0, pointCount_ = 0;
+  double spacing_ = 0;
 };
 
 }  // namespace sa

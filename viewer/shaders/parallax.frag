@@ -1,18 +1,26 @@
 #version 450 core
 // Per-pixel ray casting of one cell's height field: Lu, Low & Zheng §3.3. The ray is
 // expressed in the cell's frame (M1, §3.2.2), clipped to the box analytically (so a camera
-// inside the box still sees it: the boxes' back faces are rasterized), marched with
-// `iterations` linear steps, refined by bisection + a final secant step, and kept only if the
-// hit is on a covered texel inside the box (the boundary test, §3.3.1); otherwise discarded
-// so boxes behind show through. gl_FragDepth comes from the true hit point.
+// inside the box still sees it when its back faces are rasterized), marched with the box's
+// linear steps, refined by bisection + a final secant step, and kept only if the hit is on a
+// covered texel inside the box (the boundary test, §3.3.1); otherwise discarded so boxes
+// behind show through. gl_FragDepth comes from the true hit point.
+//
+// FRONT_FACES (defined by the renderer for boxes the camera is outside of): the fragment is
+// on the box's front face and the hit lies behind it, so with reverse-Z the written depth is
+// never greater than the rasterized one; declaring that keeps early depth rejection.
 #include "heightfield.glsl"
 #include "shading.glsl"
 
+#ifdef FRONT_FACES
+layout(depth_less) out float gl_FragDepth;
+#endif
+
 in vec3 vFrame;
 flat in int vCell;
+flat in int vSteps;
 flat in vec3 vCamFrame;
 
-uniform int iterations;
 uniform int refineSteps;
 uniform float nearPlane;
 uniform vec3 viewForward;   // world forward axis of the camera
@@ -21,6 +29,7 @@ uniform vec3 baseColor;
 
 layout(location = 0) out vec4 outColor;
 layout(location = 1) out float outDepth;  // linear view depth along the forward axis
+layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
 
 void main() {
   Cell c = cells[vCell];
@@ -38,6 +47,7 @@ void main() {
 
   // Linear search: the first sample below the surface after one above it. A ray that
   // starts below the surface sees the sheet from behind: the surface is one-sided.
+  int iterations = max(vSteps, 1);
   float dt = (tExit - tEnter) / float(iterations);
   float tPrev = tEnter;
   vec3 p = o + d * tEnter;
@@ -91,4 +101,5 @@ void main() {
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
   outColor = vec4(shadeLambert(albedo, nWorld, -world), 1.0);
   outDepth = viewDepth;
+  outNormal = vec4(normalize(nWorld), 0.0);
 }

@@ -1,0 +1,228 @@
+#include <algorithm>
+#include <cstdio>
+#include <sstream>
+
+#include "atlas/pack_file.h"
+#include "cli/args.h"
+#include "cli/commands.h"
+#include "cli/view_setup.h"
+#include "common/fileio.h"
+#include "viewer/egl_context.h"
+#include "viewer/renderer.h"
+#include "viewer/source_points.h"
+
+namespace sa {
+namespace {
+
+const char* kHelp =
+    "usage: scanatlas bench PACK [--path cams.json | --orbit N] [options]\n"
+    "\n"
+    "Batch frame-time measurement, headless (EGL): every combination of --mode and\n"
+    "--iterations renders the camera path (cycled to --frames frames after --warmup frames).\n"
+    "Per frame: GPU time (GL_TIME_ELAPSED around the draws), CPU wall time (culling, submission\n"
+    "and glFinish), boxes submitted / culled / drawn / splatted, fragments shaded.\n"
+    "\n"
+    "options:\n"
+    "  --path FILE            camera path JSON ({\"cameras\": [{\"eye\", \"target\", \"up\", \"fov\"}, ...]})\n"
+    "  --orbit N              N cameras around the bounding box (default 60)\n"
+    "  --size WxH             frame size (default 1024x1024)\n"
+    "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and 0,1,0)\n"
+    "  --warmup N             frames rendered before timing each configuration (default 10)\n"
+    "  --frames N             timed frames per configuration (default 200)\n"
+    "  --mode LIST            parallax, points (the source points as splats; reads the pack's\n"
+    "                         source files) (default parallax)\n"
+    "  --iterations LIST      ray-march step bounds for parallax (default 12)\n"
+    "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
+    "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
+    "                         turn a skip off for every configuration\n"
+    "  --csv FILE             one row per frame\n"
+    "  --json                 the summary as JSON on stdout\n"
+    "  -q, --quiet            no table\n";
+
+struct Config {
+  RenderSettings settings;
+  std::string skips = "all";
+};
+
+struct Summary {
+  double median = 0, p95 = 0, p99 = 0, min = 0, max = 0, mean = 0;
+};
+
+Summary summarize(std::vector<double> v) {
+  Summary s;
+  if (v.empty()) return s;
+  std::sort(v.begin(), v.end());
+  auto q = [&](double f) { return v[std::min(v.size() - 1, size_t(f * double(v.size() - 1) + 0.5))]; };
+  s.median = q(0.5);
+  s.p95 = q(0.95);
+  s.p99 = q(0.99);
+  s.min = v.front();
+  s.max = v.back();
+  for (double x : v) s.mean += x;
+  s.mean /= double(v.size());
+  return s;
+}
+
+std::string summaryJson(const Summary& s) {
+  char b[256];
+  std::snprintf(b, sizeof(b), "{\"median\": %.4f, \"p95\": %.4f, \"p99\": %.4f, \"min\": %.4f, \"max\": %.4f, \"mean\": %.4f}",
+                s.median, s.p95, s.p99, s.min, s.max, s.mean);
+  return b;
+}
+
+}  // namespace
+
+int cmdBench(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv,
+                     {"path", "orbit", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "csv"},
+                     {"compare-skips", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
+                      "no-sort", "json", "quiet", "help"},
+                     {{"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().size() != 1) return reportError(Status::badInput("bench: give exactly one pack (see --help)"));
+  PackReader pack;
+  s = pack.open(a.positionals()[0]);
+  if (!s) return reportError(s);
+  std::vector<Camera> cams;
+  s = camerasFromArgs(a, pack, 60, 1024, cams);
+  if (!s) return reportError(s);
+  auto warmup = parseInt("warmup", a.get("warmup", "10"), 0, 100000);
+  auto frames = parseInt("frames", a.get("frames", "200"), 1, 1000000);
+  if (!warmup) return reportError(warmup.status());
+  if (!frames) return reportError(frames.status());
+  std::vector<RenderMode> modes;
+  for (const auto& m : splitList(a.get("mode", "parallax"))) {
+    auto r = parseMode(m);
+    if (!r) return reportError(r.status());
+    modes.push_back(*r);
+  }
+  std::vector<int> iters;
+  for (const auto& t : splitList(a.get("iterations", "12"))) {
+    auto r = parseInt("iterations", t, 1, 1024);
+    if (!r) return reportError(r.status());
+    iters.push_back(int(*r));
+  }
+  RenderSettings base;
+  base.cull.frustum = !a.flag("no-frustum-cull");
+  base.cull.backfaceCull = !a.flag("no-backface-cull");
+  base.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
+  base.cull.subpixelSplats = !a.flag("no-splats");
+  base.cull.frontToBack = !a.flag("no-sort");
+  std::vector<Config> configs;
+  for (RenderMode m : modes) {
+    if (m == RenderMode::kPoints) {
+      Config c{base, "-"};
+      c.settings.mode = m;
+      configs.push_back(c);
+      continue;
+    }
+    for (int it : iters) {
+      Config c{base, "all"};
+      c.settings.iterations = it;
+      configs.push_back(c);
+    }
+  }
+  if (a.flag("compare-skips")) {
+    const int it = iters.back();
+    auto off = [&](const char* label, auto edit) {
+      Config c{base, label};
+      c.settings.iterations = it;
+      edit(c.settings.cull);
+      configs.push_back(c);
+    };
+    off("no-frustum-cull", [](CullOptions& o) { o.frustum = false; });
+    off("no-backface-cull", [](CullOptions& o) { o.backfaceCull = false; });
+    off("no-adaptive-steps", [](CullOptions& o) { o.adaptiveSteps = false; });
+    off("no-splats", [](CullOptions& o) { o.subpixelSplats = false; });
+    off("no-sort", [](CullOptions& o) { o.frontToBack = false; });
+    off("none", [](CullOptions& o) {
+      o.frustum = o.backfaceCull = o.adaptiveSteps = o.subpixelSplats = o.frontToBack = false;
+    });
+  }
+
+  EglContext ctx;
+  s = ctx.init();
+  if (!s) return reportError(s);
+  Renderer renderer;
+  s = renderer.init(pack);
+  if (!s) return reportError(s);
+  const bool quiet = a.flag("quiet") || a.flag("json");
+  if (std::find(modes.begin(), modes.end(), RenderMode::kPoints) != modes.end()) {
+    if (!quiet) std::fprintf(stderr, "bench: reading the source points for the points baseline...\n");
+    SourcePoints pts;
+    s = loadSourcePoints(pack, pts);
+    if (!s) return reportError(s);
+    s = renderer.setPoints(pts.xyz, pts.rgba, pack.meta().sampleSpacing);
+    if (!s) return reportError(s);
+  }
+  std::ostringstream csv;
+  csv << "config,mode,iterations,skips,frame,camera,gpu_ms,cpu_ms,boxes_submitted,boxes_culled,boxes_drawn,"
+         "boxes_inside,splats,points,fragments\n";
+  std::ostringstream json;
+  json << "{\"pack\": \"" << jsonEscape(pack.path()) << "\", \"renderer\": \"" << jsonEscape(ctx.renderer())
+       << "\", \"width\": " << cams[0].width << ", \"height\": " << cams[0].height << ", \"frames\": " << *frames
+       << ", \"warmup\": " << *warmup << ", \"cameras\": " << cams.size() << ", \"configs\": [";
+  if (!quiet)
+    std::fprintf(stderr, "%-9s %5s %-18s %9s %9s %9s %9s %9s %8s %8s %8s %8s %12s\n", "mode", "iters", "skips",
+                 "gpu med", "gpu p95", "gpu p99", "gpu min", "cpu med", "fps", "drawn", "culled", "splats", "fragments");
+  for (size_t ci = 0; ci < configs.size(); ++ci) {
+    const Config& c = configs[ci];
+    FrameResult fr;
+    for (int64_t f = 0; f < *warmup; ++f) {
+      s = renderer.render(cams[size_t(f) % cams.size()], c.settings, fr, 0u);
+      if (!s) return reportError(s);
+    }
+    std::vector<double> gpu, cpu;
+    double drawn = 0, culled = 0, splats = 0, frags = 0, submitted = 0;
+    for (int64_t f = 0; f < *frames; ++f) {
+      const size_t cam = size_t(f) % cams.size();
+      s = renderer.render(cams[cam], c.settings, fr, 0u);
+      if (!s) return reportError(s);
+      const FrameStats& st = fr.stats;
+      gpu.push_back(st.gpuMs);
+      cpu.push_back(st.cpuMs);
+      drawn += st.drawn;
+      culled += st.culled;
+      splats += st.splats;
+      frags += double(st.fragments);
+      submitted += st.submitted;
+      csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f
+          << "," << cam << "," << st.gpuMs << "," << st.cpuMs << "," << st.submitted << "," << st.culled << ","
+          << st.drawn << "," << st.inside << "," << st.splats << "," << st.points << "," << st.fragments << "\n";
+    }
+    const double n = double(*frames);
+    const Summary g = summarize(gpu), cp = summarize(cpu);
+    const bool points = c.settings.mode == RenderMode::kPoints;
+    if (!quiet)
+      std::fprintf(stderr, "%-9s %5s %-18s %9.2f %9.2f %9.2f %9.2f %9.2f %8.1f %8.0f %8.0f %8.0f %12.0f\n",
+                   modeName(c.settings.mode), points ? "-" : std::to_string(c.settings.iterations).c_str(),
+                   c.skips.c_str(), g.median, g.p95, g.p99, g.min, cp.median, 1000.0 / std::max(cp.median, 1e-9),
+                   drawn / n, culled / n, splats / n, frags / n);
+    json << (ci ? ", " : "") << "{\"mode\": \"" << modeName(c.settings.mode) << "\", \"iterations\": "
+         << (points ? 0 : c.settings.iterations) << ", \"skips\": \"" << c.skips << "\", \"gpu_ms\": " << summaryJson(g)
+         << ", \"cpu_ms\": " << summaryJson(cp) << ", \"fps\": " << 1000.0 / std::max(cp.median, 1e-9)
+         << ", \"boxes_submitted\": " << submitted / n << ", \"boxes_culled\": " << culled / n
+         << ", \"boxes_drawn\": " << drawn / n << ", \"splats\": " << splats / n << ", \"fragments\": " << frags / n
+         << ", \"fragments_are_invocations\": " << (fr.stats.fragmentsAreInvocations ? "true" : "false")
+         << ", \"atlas_bytes\": " << renderer.gpuBytes() << ", \"point_bytes\": " << (points ? renderer.pointBytes() : 0)
+         << "}";
+  }
+  json << "]}\n";
+  if (a.has("csv")) {
+    const std::string text = csv.str();
+    s = writeFileAtomic(a.get("csv"), text.data(), text.size());
+    if (!s) return reportError(s);
+  }
+  if (a.flag("json")) std::fputs(json.str().c_str(), stdout);
+  if (!quiet)
+    std::fprintf(stderr, "renderer: %s; %zu camera(s), %lld frames per configuration, times in ms; atlas %.1f MiB on the GPU\n",
+                 ctx.renderer().c_str(), cams.size(), (long long)*frames, renderer.gpuBytes() / 1048576.0);
+  return 0;
+}
+
+}  // namespace sa

@@ -1,0 +1,77 @@
+#include "cli/view_setup.h"
+
+#include <sstream>
+
+#include "viewer/camera_path.h"
+
+namespace sa {
+
+std::vector<std::string> splitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi) {
+  const PackMeta& m = pack.meta();
+  const Eigen::Vector3d origin(m.origin[0], m.origin[1], m.origin[2]);
+  lo = origin + Eigen::Vector3d(m.boundsMin[0], m.boundsMin[1], m.boundsMin[2]);
+  hi = origin + Eigen::Vector3d(m.boundsMax[0], m.boundsMax[1], m.boundsMax[2]);
+}
+
+Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, int defaultSize,
+                       std::vector<Camera>& out) {
+  Camera base;
+  base.width = base.height = defaultSize;
+  if (a.has("size")) SA_RETURN_IF_ERROR(parseWxH("size", a.get("size"), base.width, base.height));
+  if (a.has("fov")) {
+    auto v = parseNumber("fov", a.get("fov"));
+    if (!v) return v.status();
+    base.fovDeg = *v;
+  }
+  if (a.has("up")) {
+    auto v = parseVec3("up", a.get("up"));
+    if (!v) return v.status();
+    if (v->norm() == 0) return Status::badInput("--up must not be zero");
+    base.up = v->normalized();
+  }
+  Eigen::Vector3d lo, hi;
+  packBounds(pack, lo, hi);
+  const int given = int(a.has("path")) + int(a.has("orbit")) + int(a.has("eye"));
+  if (given > 1) return Status::badInput("give one of --path, --orbit and --eye");
+  if (a.has("path")) {
+    auto cams = readCameraPath(a.get("path"), base.width, base.height);
+    if (!cams) return cams.status();
+    out = *cams;
+    return Status::ok();
+  }
+  if (a.has("orbit") || (!a.has("eye") && defaultOrbit > 0)) {
+    int n = defaultOrbit;
+    if (a.has("orbit")) {
+      auto v = parseInt("orbit", a.get("orbit"), 1, 100000);
+      if (!v) return v.status();
+      n = int(*v);
+    }
+    out = orbitCameras(lo, hi, n, base.up, base.fovDeg, base.width, base.height);
+    return Status::ok();
+  }
+  Camera c = orbitCameras(lo, hi, 1, base.up, base.fovDeg, base.width, base.height)[0];
+  if (a.has("target")) {
+    auto v = parseVec3("target", a.get("target"));
+    if (!v) return v.status();
+    c.target = *v;
+  }
+  if (a.has("eye")) {
+    auto v = parseVec3("eye", a.get("eye"));
+    if (!v) return v.status();
+    c.eye = *v;
+  }
+  SA_RETURN_IF_ERROR(c.validate());
+  out.push_back(c);
+  return Status::ok();
+}
+
+}  // namespace sa

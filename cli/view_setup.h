@@ -1,0 +1,19 @@
+// Camera options shared by render, bench and eval: --path, --orbit, --eye/--target/--up/--fov,
+// --size.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "atlas/pack_file.h"
+#include "cli/args.h"
+#include "viewer/camera.h"
+
+namespace sa {
+
+// defaultOrbit: views when neither --path nor --eye is given (0: one default view).
+Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, int defaultSize,
+                       std::vector<Camera>& out);
+std::vector<std::string> splitList(const std::string& s);
+void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi);
+
+}  // namespace sa

@@ -1,0 +1,57 @@
+// Per-frame visibility on the CPU, in double precision and camera-relative: which cells'
+// boxes are drawn, how (front faces when the camera is outside the box, back faces when it
+// is inside, a single splat when the box covers less than about a pixel), with how many
+// ray-march steps, and in which order (front to back, for early depth rejection).
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "atlas/pack_format.h"
+#include "viewer/camera.h"
+
+namespace sa {
+
+struct CullOptions {
+  bool frustum = true;         // drop boxes outside the view frustum
+  bool backfaceCull = true;    // rasterize front faces only (back faces where the camera is inside)
+  bool adaptiveSteps = true;   // steps from projected size and view angle, bounded by maxSteps
+  bool subpixelSplats = true;  // boxes under splatPixels drawn as one splat
+  bool frontToBack = true;     // sort boxes by distance
+  int maxSteps = 12;
+  int minSteps = 4;
+  double splatPixels = 1.0;
+};
+
+struct DrawItem {
+  uint32_t cell;
+  uint32_t steps;  // linear-search steps for this box
+};
+static_assert(sizeof(DrawItem) == 8);
+
+struct VisibleSet {
+  std::vector<DrawItem> front;   // camera outside the box: rasterize front faces
+  std::vector<DrawItem> inside;  // camera inside (or touching) the box: back faces
+  std::vector<DrawItem> splats;  // sub-pixel boxes
+  uint32_t submitted = 0, culled = 0;
+};
+
+class CellCuller {
+ public:
+  explicit CellCuller(std::span<const CellRecord> cells);
+  // eyeRel: the camera position relative to the pack origin. nearPlane as in the projection.
+  void compute(const Camera& cam, const Eigen::Vector3d& eyeRel, double nearPlane, const CullOptions& opt,
+               VisibleSet& out) const;
+
+ private:
+  struct Bounds {
+    Eigen::Vector3d center, origin, u, v, w;
+    double radius;
+    double box[6];
+  };
+  std::vector<Bounds> bounds_;
+};
+
+}  // namespace sa

@@ -1,0 +1,66 @@
+#include "viewer/eval.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace sa {
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + long(k), v.end());
+  return v[k];
+}
+
+ViewMetrics evaluateView(const Image& tc, const std::vector<float>& td, const std::vector<float>& tn,
+                         const ReferenceView& ref, const Image& rs, double diag) {
+  ViewMetrics m;
+  const int W = rs.width, H = rs.height;
+  size_t perimeter = 0, differ = 0;
+  double se = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const size_t i = size_t(y) * W + x;
+      const bool a = std::isfinite(td[i]), b = std::isfinite(ref.depth[i]);
+      if (b) {
+        bool edge = x == 0 || y == 0 || x == W - 1 || y == H - 1;
+        if (!edge)
+          edge = !std::isfinite(ref.depth[i - 1]) || !std::isfinite(ref.depth[i + 1]) ||
+                 !std::isfinite(ref.depth[i - W]) || !std::isfinite(ref.depth[i + W]);
+        perimeter += edge;
+      }
+      if (a != b) ++differ;
+      if (a && b) {
+        ++m.both;
+        m.depthErrors.push_back(std::abs(double(td[i]) - ref.depth[i]) / diag);
+        if (!tn.empty()) {
+          const double dx = tn[3 * i], dy = tn[3 * i + 1], dz = tn[3 * i + 2];
+          const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+          if (len > 0.5) {
+            // Reference scan triangles have no consistent winding: compare lines, not signs.
+            const double c = std::abs(dx * ref.normals[3 * i] + dy * ref.normals[3 * i + 1] + dz * ref.normals[3 * i + 2]) / len;
+            m.normalErrors.push_back(std::acos(std::min(1.0, c)) * 180.0 / M_PI);
+          }
+        }
+      } else if (a) {
+        ++m.onlyTest;
+      } else if (b) {
+        ++m.onlyRef;
+      }
+      for (int k = 0; k < 3; ++k) {
+        const double d = double(tc.rgba[4 * i + k]) - double(rs.rgba[4 * i + k]);
+        se += d * d;
+      }
+    }
+  const size_t uni = m.both + m.onlyTest + m.onlyRef;
+  m.iou = uni ? double(m.both) / double(uni) : 1.0;
+  m.silhouetteError = perimeter ? double(differ) / double(perimeter) : 0.0;
+  m.depthMedian = percentile(m.depthErrors, 0.5);
+  m.depthP95 = percentile(m.depthErrors, 0.95);
+  m.normalMedianDeg = m.normalErrors.empty() ? -1 : percentile(m.normalErrors, 0.5);
+  const double mse = se / (3.0 * W * H);
+  m.psnr = mse > 0 ? 10 * std::log10(255.0 * 255.0 / mse) : 99.0;
+  return m;
+}
+
+}  // namespace sa

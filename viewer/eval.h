@@ -1,0 +1,29 @@
+// Image error of a render against a reference view of the original data (docs/BENCHMARKS.md):
+// coverage IoU, silhouette error, depth error relative to the bounding-box diagonal, normal
+// angular error and PSNR of the shaded image.
+#pragma once
+#include <vector>
+
+#include "viewer/reference.h"
+
+namespace sa {
+
+struct ViewMetrics {
+  double iou = 0;
+  double silhouetteError = 0;   // pixels whose coverage differs / reference silhouette perimeter (pixels)
+  double depthMedian = 0, depthP95 = 0;  // relative to the diagonal, over pixels both cover
+  double normalMedianDeg = -1;  // -1 when the render has no normals (points mode)
+  double psnr = 0;              // dB, RGB over the whole image
+  size_t both = 0, onlyTest = 0, onlyRef = 0;
+  std::vector<double> depthErrors;   // per pixel both cover, relative (for pooling)
+  std::vector<double> normalErrors;  // degrees
+};
+
+// test: the render's colour, linear depth and (optional, may be empty) world normals.
+ViewMetrics evaluateView(const Image& testColor, const std::vector<float>& testDepth,
+                         const std::vector<float>& testNormals, const ReferenceView& ref, const Image& refShaded,
+                         double diagonal);
+
+double percentile(std::vector<double> v, double q);
+
+}  // namespace sa
