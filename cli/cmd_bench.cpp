@@ -33,6 +33,7 @@ const char* kHelp =
     "                         source files) (default parallax)\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 12)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
+    "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
     "                         turn a skip off for every configuration\n"
     "  --csv FILE             one row per frame\n"
@@ -76,7 +77,7 @@ int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"path", "orbit", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "csv"},
-                     {"compare-skips", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
+                     {"compare-skips", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -108,6 +109,7 @@ int cmdBench(int argc, char** argv) {
     iters.push_back(int(*r));
   }
   RenderSettings base;
+  base.useColor = !a.flag("no-color");
   base.cull.frustum = !a.flag("no-frustum-cull");
   base.cull.backfaceCull = !a.flag("no-backface-cull");
   base.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
