@@ -35,6 +35,7 @@ const char* kHelp =
     "  --min-split N          cells with fewer points are not split further (default 32)\n"
     "  --neighbours K         neighbours for normal estimation when the input has none (default 24)\n"
     "  --as-points            ignore mesh faces: build height maps from the vertices by pull-push\n"
+    "  --strict               a NaN or infinite coordinate is an error (default: skipped, counted)\n"
     "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
     "  --json                 print the summary as JSON on stdout\n"
     "  -q, --quiet            no progress and no summary\n";
@@ -83,7 +84,7 @@ int cmdPack(int argc, char** argv) {
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
                       "neighbours", "scratch", "outliers", "min-split"},
-                     {"as-points", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+                     {"as-points", "strict", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
     return 0;
@@ -144,6 +145,7 @@ int cmdPack(int argc, char** argv) {
     opt.normalNeighbours = static_cast<int>(*v);
   }
   opt.asPoints = a.flag("as-points");
+  opt.strict = a.flag("strict");
   opt.scratchParent = a.get("scratch");
   for (int i = 0; i < argc; ++i) opt.commandLine += std::string(i ? " " : "") + argv[i];
   const std::string out = a.get("output");

@@ -114,6 +114,14 @@ uint64_t InputSet::pointCount() const {
   return n;
 }
 
+std::pair<std::string, uint64_t> InputSet::locate(uint64_t i) const {
+  for (const auto& f : files_) {
+    if (i < f.points) return {f.path, i};
+    i -= f.points;
+  }
+  return {files_.empty() ? std::string() : files_.back().path, i};
+}
+
 bool InputSet::allHaveNormals() const {
   return std::all_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasNormals; });
 }

@@ -33,6 +33,8 @@ class InputSet {
   // Per scan: direction from the surface toward the scanner (aligned coordinates).
   const std::vector<Eigen::Vector3d>& towardScanner() const { return towardScanner_; }
   const std::vector<std::string>& warnings() const { return warnings_; }
+  // File and index within it of the point with global index `i` (as in PointBatch::firstIndex).
+  std::pair<std::string, uint64_t> locate(uint64_t i) const;
   // The paths the user named (absolute), before scan sets were expanded.
   const std::vector<std::string>& sourcePaths() const { return sourcePaths_; }
 

@@ -16,10 +16,19 @@ bool finite3(double x, double y, double z) { return std::isfinite(x) && std::isf
 
 class BoundsSink : public BatchSink {
  public:
-  BoundsSink(BoundsInfo& out, const ProgressFn& p, uint64_t total) : out_(out), progress_(p), total_(total) {}
+  BoundsSink(BoundsInfo& out, const ProgressFn& p, uint64_t total, const InputSet& in, bool strict)
+      : out_(out), progress_(p), total_(total), in_(in), strict_(strict) {}
   Status onPoints(const PointBatch& b) override {
     for (size_t i = 0; i < b.size(); ++i) {
-      if (!finite3(b.x[i], b.y[i], b.z[i])) { ++out_.skipped; continue; }
+      if (!finite3(b.x[i], b.y[i], b.z[i])) {
+        if (strict_) {
+          const auto [file, index] = in_.locate(b.firstIndex + i);
+          return Status::badInput(file + ": vertex " + std::to_string(index) +
+                                  " has a NaN or infinite coordinate (--strict; without it such points are skipped)");
+        }
+        ++out_.skipped;
+        continue;
+      }
       Eigen::Vector3d p(b.x[i], b.y[i], b.z[i]);
       out_.min = out_.min.cwiseMin(p);
       out_.max = out_.max.cwiseMax(p);
@@ -36,6 +45,8 @@ class BoundsSink : public BatchSink {
   BoundsInfo& out_;
   const ProgressFn& progress_;
   uint64_t total_, seen_ = 0;
+  const InputSet& in_;
+  bool strict_;
   Eigen::Vector3d sum_ = Eigen::Vector3d::Zero(), ref_ = Eigen::Vector3d::Zero();
 };
 
@@ -192,9 +203,9 @@ Status splitChunk(const ChunkInfo& c, const std::string& dir, std::vector<ChunkI
 
 }  // namespace
 
-Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress) {
+Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress, bool strict) {
   out = BoundsInfo{};
-  BoundsSink sink(out, progress, input.pointCount());
+  BoundsSink sink(out, progress, input.pointCount(), input, strict);
   SA_RETURN_IF_ERROR(input.stream(sink, false));
   out.centroid = sink.centroid();
   if (out.count == 0) return Status::badInput(input.files()[0].path + ": no finite points in the input");

@@ -56,8 +56,9 @@ struct ChunkInfo {
 
 using ProgressFn = std::function<void(const char* phase, uint64_t done, uint64_t total)>;
 
-// Pass 1: bounds, centroid, finite / skipped counts.
-Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress);
+// Pass 1: bounds, centroid, finite / skipped counts. strict: a NaN/Inf coordinate is an error
+// naming the file and the point, instead of being skipped and counted.
+Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress, bool strict = false);
 
 // The node's cube, relative to the pack origin.
 inline void nodeCube(const Quantizer& qz, int level, uint32_t ix, uint32_t iy, uint32_t iz,

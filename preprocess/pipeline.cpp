@@ -54,7 +54,7 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   // ---- pass 1: bounds ----
   auto t0 = Clock::now();
   BoundsInfo bounds;
-  SA_RETURN_IF_ERROR(computeBounds(input, bounds, progress));
+  SA_RETURN_IF_ERROR(computeBounds(input, bounds, progress, opt.strict));
   sum.pointsRead = bounds.count;
   sum.pointsSkipped = bounds.skipped;
   sum.seconds[0] = secondsSince(t0);

@@ -18,6 +18,7 @@ struct PackOptions {
   double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
   double coverageRadius = 1.5;    // in sample spacings: farther texels stay empty
   bool asPoints = false;          // ignore faces: pull-push from the vertices
+  bool strict = false;            // NaN/Inf coordinates are an error instead of skipped
   OctreeParams octree;
   int normalNeighbours = 24;
   uint32_t maxPageSize = 4096;

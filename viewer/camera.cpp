@@ -1,5 +1,6 @@
 #include "viewer/camera.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace sa {
@@ -44,7 +45,9 @@ Status Camera::validate() const {
 std::vector<Camera> orbitCameras(const Eigen::Vector3d& bmin, const Eigen::Vector3d& bmax, int count,
                                  const Eigen::Vector3d& upIn, double fovDeg, int width, int height) {
   const Eigen::Vector3d c = (bmin + bmax) / 2;
-  const double r = std::max((bmax - bmin).norm() / 2, 1e-12);
+  // A box of zero size (one point, duplicates) still gets a camera that differs from its
+  // target in double precision, also at georeferenced coordinates.
+  const double r = std::max({(bmax - bmin).norm() / 2, 1e-12, 1e-9 * c.cwiseAbs().maxCoeff()});
   const double halfFov = std::min(fovDeg, fovDeg * width / double(height)) * M_PI / 360.0;
   const double dist = r / std::sin(halfFov) * 1.02;
   const Eigen::Vector3d up = upIn.normalized();

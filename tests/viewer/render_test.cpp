@@ -5,7 +5,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "../common/test_util.h"
+#include "../common/render_util.h"
 #include "atlas/raycast.h"
 #include "preprocess/pipeline.h"
 #include "viewer/egl_context.h"
@@ -26,52 +26,16 @@ class RenderTest : public ::testing::Test {
 
   std::string pack(const std::vector<Eigen::Vector3d>& pts, const std::vector<Eigen::Vector3d>& nrm,
                    const std::string& name, PackOptions opt = {}) {
-    test::writePointsPly(dir_.file(name + ".ply"), pts, &nrm);
-    auto in = InputSet::open({dir_.file(name + ".ply")});
-    EXPECT_TRUE(in.isOk());
-    PackSummary sum;
-    Status s = packInput(*in, dir_.file(name + ".hfa"), opt, nullptr, sum);
-    EXPECT_TRUE(s.isOk()) << s.message();
-    return dir_.file(name + ".hfa");
+    return test::packPoints(dir_, pts, nrm, name, opt);
   }
-
-  // Linear depth of the CPU reference ray cast for every pixel (+inf on a miss).
-  static std::vector<float> cpuDepth(const PackReader& p, const Camera& cam) {
-    CpuRaycaster rc(p);
-    const Eigen::Vector3d origin(p.meta().origin);
-    std::vector<float> d(size_t(cam.width) * cam.height, INFINITY);
-    for (int y = 0; y < cam.height; ++y)
-      for (int x = 0; x < cam.width; ++x) {
-        const Eigen::Vector3d dir = cam.rayDirection(x + 0.5, y + 0.5);
-        RayHit h = rc.cast(cam.eye - origin, dir);
-        if (h.hit) d[size_t(y) * cam.width + x] = float(h.t * dir.dot(cam.forward()));
-      }
-    return d;
-  }
+  static std::vector<float> cpuDepth(const PackReader& p, const Camera& cam) { return test::cpuDepth(p, cam); }
 
   test::TempDir dir_;
 };
 EglContext* RenderTest::ctx_ = nullptr;
 
-struct Agreement {
-  size_t covered = 0, agree = 0;
-  double maxErr = 0;
-};
-
-Agreement agreement(const std::vector<float>& gpu, const std::vector<float>& cpu, double tol) {
-  Agreement a;
-  for (size_t i = 0; i < gpu.size(); ++i) {
-    const bool g = std::isfinite(gpu[i]), c = std::isfinite(cpu[i]);
-    if (!g && !c) continue;
-    ++a.covered;
-    if (g && c) {
-      const double e = std::abs(double(gpu[i]) - cpu[i]);
-      a.maxErr = std::max(a.maxErr, e);
-      if (e <= tol) ++a.agree;
-    }
-  }
-  return a;
-}
+using test::Agreement;
+using test::agreement;
 
 // Stated tolerance: 0.1% of the bounding-box diagonal, on >= 99% of the pixels either
 // render covers.
