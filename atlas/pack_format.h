@@ -55,7 +55,8 @@ struct PackMeta {
   uint32_t chunkCount;
   uint64_t texelsUsed;
   double seconds[6];  // count, distribute, normals+octree, heightmaps, write, total
-  uint8_t zero[64];
+  uint64_t inputHash;  // XXH3 of the input files' bytes and the pack options (0: unknown)
+  uint8_t zero[56];
 };
 static_assert(sizeof(PackMeta) == 256);
 

@@ -36,6 +36,8 @@ const char* kHelp =
     "  --neighbours K         neighbours for normal estimation when the input has none (default 24)\n"
     "  --as-points            ignore mesh faces: build height maps from the vertices by pull-push\n"
     "  --strict               a NaN or infinite coordinate is an error (default: skipped, counted)\n"
+    "  --force                repack even if OUT already holds a pack of the same input and options\n"
+    "                         (checked by a hash of the input bytes and options, stored in the pack)\n"
     "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
     "  --json                 print the summary as JSON on stdout\n"
     "  -q, --quiet            no progress and no summary\n";
@@ -84,7 +86,7 @@ int cmdPack(int argc, char** argv) {
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
                       "neighbours", "scratch", "outliers", "min-split"},
-                     {"as-points", "strict", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+                     {"as-points", "strict", "force", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
     return 0;
@@ -146,6 +148,7 @@ int cmdPack(int argc, char** argv) {
   }
   opt.asPoints = a.flag("as-points");
   opt.strict = a.flag("strict");
+  opt.force = a.flag("force");
   opt.scratchParent = a.get("scratch");
   for (int i = 0; i < argc; ++i) opt.commandLine += std::string(i ? " " : "") + argv[i];
   const std::string out = a.get("output");
@@ -162,23 +165,26 @@ int cmdPack(int argc, char** argv) {
   progress.finish();
   if (!s) return reportError(s);
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
+  if (sum.upToDate && !quiet && !a.flag("json"))
+    std::fprintf(stderr, "%s is up to date (same input bytes and options, hash %016llx, checked in %.2fs); --force repacks\n",
+                 out.c_str(), (unsigned long long)sum.inputHash, sum.seconds[5]);
   if (a.flag("json")) {
     std::printf("{\"output\": \"%s\", \"points\": %llu, \"skipped_points\": %llu, \"triangles\": %llu, \"cells\": %u, "
                 "\"forced_cells\": %u, \"degenerate_cells\": %u, \"chunks\": %u, \"pages\": %u, \"page_size\": %u, "
                 "\"texels\": %llu, \"texel_size\": %.9g, \"sample_spacing\": %.9g, \"bytes\": %llu, "
-                "\"bytes_per_point\": %.3f, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
+                "\"bytes_per_point\": %.3f, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
                 "\"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
                 (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.chunks,
                 sum.pages, sum.pageSize, (unsigned long long)sum.texels, sum.texelSize, sum.spacing,
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
-                sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
+                sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
                 sum.hasColor ? "true" : "false");
     for (size_t i = 0; i < sum.cellsPerLevel.size(); ++i) std::printf("%s%u", i ? ", " : "", sum.cellsPerLevel[i]);
     std::printf("], \"seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
                 "\"write\": %.3f, \"total\": %.3f}, \"mpts_per_s\": %.3f}\n",
                 sum.seconds[0], sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], sum.seconds[5], mpts);
-  } else if (!quiet) {
+  } else if (!quiet && !sum.upToDate) {
     std::fprintf(stderr,
                  "packed %s: %llu points%s -> %u cells (%u forced), %u chunk(s)\n"
                  "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %u^2, %s%s\n"

@@ -1,11 +1,13 @@
 #include "preprocess/pipeline.h"
 
+#include <xxhash.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <mutex>
 #include <unordered_map>
 
@@ -37,13 +39,88 @@ void decodePositions(const std::vector<ChunkPoint>& pts, const Quantizer& qz, st
 
 Eigen::Vector3d vec(const double* d) { return Eigen::Vector3d(d[0], d[1], d[2]); }
 
+// Fills the summary from an existing pack (the up-to-date case).
+void summarizeExisting(const PackReader& r, PackSummary& sum) {
+  const PackMeta& m = r.meta();
+  sum.pointsRead = m.sourcePoints;
+  sum.pointsSkipped = m.skippedPoints;
+  sum.triangles = m.sourceTriangles;
+  sum.cells = m.cellCount;
+  sum.pages = m.pageCount;
+  sum.pageSize = m.pageSize;
+  sum.chunks = m.chunkCount;
+  sum.texels = m.texelsUsed;
+  sum.spacing = m.sampleSpacing;
+  sum.texelSize = m.texelSize;
+  sum.fileBytes = r.fileBytes();
+  sum.hasColor = r.hasColor();
+  sum.fromTriangles = (m.flags & kPackFromTriangles) != 0;
+  sum.normalsEstimated = (m.flags & kPackNormalsEstimated) != 0;
+  for (const CellRecord& c : r.cells()) {
+    if (c.level >= sum.cellsPerLevel.size()) sum.cellsPerLevel.resize(c.level + 1, 0);
+    ++sum.cellsPerLevel[c.level];
+    sum.forcedCells += (c.flags & kCellForced) != 0;
+    sum.degenerateCells += (c.flags & kCellDegenerate) != 0;
+  }
+}
+
 }  // namespace
+
+Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
+  XXH3_state_t* st = XXH3_createState();
+  XXH3_64bits_reset(st);
+  char opts[512];
+  const int n = std::snprintf(opts, sizeof(opts), "v1 %llu %llu %.17g %.17g %.17g %d %d %.17g %u %.17g %d %u",
+                              (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
+                              o.texelPerSpacing, o.coverageRadius, int(o.asPoints), o.octree.maxDepth,
+                              o.octree.maxAngleDeg, o.octree.minSplitPoints, o.octree.outlierFraction,
+                              o.normalNeighbours, o.maxPageSize);
+  XXH3_64bits_update(st, opts, size_t(n));
+  std::vector<char> buf(1 << 20);
+  for (const InputFile& f : input.files()) {
+    BufferedReader in;
+    Status s = in.open(f.path, 1 << 12);
+    if (!s) {
+      XXH3_freeState(st);
+      return s;
+    }
+    const uint64_t size = in.fileSize();
+    XXH3_64bits_update(st, &size, sizeof(size));
+    for (int a = 0; a < 9; ++a) XXH3_64bits_update(st, &f.rotation(a), sizeof(double));
+    XXH3_64bits_update(st, f.translation.data(), 3 * sizeof(double));
+    std::FILE* fp = std::fopen(f.path.c_str(), "rb");
+    if (!fp) {
+      XXH3_freeState(st);
+      return Status::badInput(f.path + ": cannot open");
+    }
+    size_t got;
+    while ((got = std::fread(buf.data(), 1, buf.size(), fp)) > 0) XXH3_64bits_update(st, buf.data(), got);
+    std::fclose(fp);
+  }
+  const uint64_t h = XXH3_64bits_digest(st);
+  XXH3_freeState(st);
+  return h == 0 ? 1 : h;
+}
 
 Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& opt,
                  const ProgressFn& progress, PackSummary& sum) {
   const auto tStart = Clock::now();
   sum = PackSummary{};
   sum.warnings = input.warnings();
+  {
+    auto h = hashInput(input, opt);
+    if (!h) return h.status();
+    sum.inputHash = *h;
+    sum.hashSeconds = secondsSince(tStart);
+    PackReader existing;
+    if (!opt.force && std::filesystem::exists(outPath) && existing.open(outPath).isOk() &&
+        existing.meta().inputHash == sum.inputHash) {
+      summarizeExisting(existing, sum);
+      sum.upToDate = true;
+      sum.seconds[5] = secondsSince(tStart);
+      return Status::ok();
+    }
+  }
   const bool triangles = input.hasTriangles() && !opt.asPoints;
   const bool fileNormals = input.allHaveNormals();
   const bool color = input.anyHasColors();
@@ -261,6 +338,7 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   meta.maxDepth = static_cast<uint32_t>(opt.octree.maxDepth);
   meta.chunkCount = sum.chunks;
   meta.texelsUsed = sum.texels;
+  meta.inputHash = sum.inputHash;
   // NOTE (FORMAT.md): one "source: <path>" line per input, then the command line.
   std::string note;
   for (const auto& f : input.sourcePaths()) note += "source: " + f + "\n";

@@ -19,6 +19,7 @@ struct PackOptions {
   double coverageRadius = 1.5;    // in sample spacings: farther texels stay empty
   bool asPoints = false;          // ignore faces: pull-push from the vertices
   bool strict = false;            // NaN/Inf coordinates are an error instead of skipped
+  bool force = false;             // repack even when the output is up to date
   OctreeParams octree;
   int normalNeighbours = 24;
   uint32_t maxPageSize = 4096;
@@ -34,12 +35,18 @@ struct PackSummary {
   double seconds[6] = {0, 0, 0, 0, 0, 0};
   std::vector<uint32_t> cellsPerLevel;
   bool normalsEstimated = false, fromTriangles = false, hasColor = false;
+  bool upToDate = false;  // the output already held this pack (same input hash): nothing done
+  uint64_t inputHash = 0;
+  double hashSeconds = 0;
   std::vector<std::string> warnings;
 };
 
 // Bytes of working memory per point while a chunk is processed (records, positions,
 // normals, kd-tree, tile samples); sets the chunk size from the memory budget.
 inline constexpr uint64_t kBytesPerPointInFlight = 240;
+
+// XXH3-64 over the input files' bytes and sizes and every option that shapes the pack.
+Result<uint64_t> hashInput(const InputSet& input, const PackOptions& options);
 
 Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& options,
                  const ProgressFn& progress, PackSummary& summary);

@@ -199,3 +199,39 @@ TEST(NormalsReal, BunnyScanNormalsFaceOutward) {
 
 }  // namespace
 }  // namespace sa
+
+namespace sa {
+namespace {
+
+TEST(Pipeline, RepackingTheSameInputWithTheSameOptionsIsSkipped) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  test::writePointsPly(d.file("s.ply"), pts, &nrm);
+  auto in = InputSet::open({d.file("s.ply")});
+  ASSERT_TRUE(in.isOk());
+  PackSummary first, second, third, fourth;
+  ASSERT_TRUE(packInput(*in, d.file("s.hfa"), PackOptions{}, nullptr, first).isOk());
+  EXPECT_FALSE(first.upToDate);
+  const auto mtime = std::filesystem::last_write_time(d.file("s.hfa"));
+  ASSERT_TRUE(packInput(*in, d.file("s.hfa"), PackOptions{}, nullptr, second).isOk());
+  EXPECT_TRUE(second.upToDate);
+  EXPECT_EQ(second.cells, first.cells);
+  EXPECT_EQ(second.texels, first.texels);
+  EXPECT_EQ(std::filesystem::last_write_time(d.file("s.hfa")), mtime);
+  PackOptions other;
+  other.octree.maxDepth = 4;  // different options: a real repack
+  ASSERT_TRUE(packInput(*in, d.file("s.hfa"), other, nullptr, third).isOk());
+  EXPECT_FALSE(third.upToDate);
+  // Same size, one byte changed in the input: a real repack.
+  pts[10].x() += 1e-3;
+  test::writePointsPly(d.file("s.ply"), pts, &nrm);
+  auto in2 = InputSet::open({d.file("s.ply")});
+  ASSERT_TRUE(in2.isOk());
+  ASSERT_TRUE(packInput(*in2, d.file("s.hfa"), other, nullptr, fourth).isOk());
+  EXPECT_FALSE(fourth.upToDate);
+  EXPECT_NE(fourth.inputHash, third.inputHash);
+}
+
+}  // namespace
+}  // namespace sa

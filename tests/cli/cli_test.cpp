@@ -1,0 +1,125 @@
+// The scanatlas binary end to end: exit codes, --json outputs of pack / info / bench / eval.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <map>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "../common/test_util.h"
+
+namespace sa {
+namespace {
+
+struct CmdResult {
+  int code;
+  std::string out;
+};
+
+CmdResult run(const std::string& args) {
+  const std::string cmd = std::string(SA_BINARY) + " " + args + " 2>/dev/null";
+  std::FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+// An icosphere mesh PLY (subdivided 4 times): a closed reference surface.
+void writeIcosphere(const std::string& path) {
+  const double t = (1 + std::sqrt(5.0)) / 2;
+  std::vector<Eigen::Vector3d> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                                    {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<std::array<int, 3>> f = {{0, 11, 5}, {0, 5, 1}, {0, 1, 7}, {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                                       {11, 10, 2}, {10, 7, 6}, {7, 1, 8}, {3, 9, 4}, {3, 4, 2}, {3, 2, 6}, {3, 6, 8},
+                                       {3, 8, 9}, {4, 9, 5}, {2, 4, 11}, {6, 2, 10}, {8, 6, 7}, {9, 8, 1}};
+  for (auto& p : v) p.normalize();
+  for (int s = 0; s < 4; ++s) {
+    std::vector<std::array<int, 3>> g;
+    std::map<std::pair<int, int>, int> mid;
+    auto m = [&](int a, int b) {
+      auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back((v[size_t(a)] + v[size_t(b)]).normalized());
+      return mid[key] = int(v.size()) - 1;
+    };
+    for (auto& tri : f) {
+      const int a = m(tri[0], tri[1]), b = m(tri[1], tri[2]), c = m(tri[2], tri[0]);
+      g.push_back({tri[0], a, c});
+      g.push_back({tri[1], b, a});
+      g.push_back({tri[2], c, b});
+      g.push_back({a, b, c});
+    }
+    f = g;
+  }
+  std::ofstream o(path);
+  o << "ply\nformat ascii 1.0\nelement vertex " << v.size() << "\nproperty double x\nproperty double y\nproperty double z\n"
+    << "element face " << f.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
+  o.precision(17);
+  for (auto& p : v) o << p.x() << " " << p.y() << " " << p.z() << "\n";
+  for (auto& tri : f) o << "3 " << tri[0] << " " << tri[1] << " " << tri[2] << "\n";
+}
+
+TEST(Cli, ExitCodesAndErrors) {
+  test::TempDir d;
+  EXPECT_EQ(run("").code, 2);
+  EXPECT_EQ(run("--help").code, 0);
+  EXPECT_EQ(run("frobnicate").code, 2);
+  EXPECT_EQ(run("pack --bogus").code, 2);
+  EXPECT_EQ(run("pack " + d.file("missing.ply") + " -o " + d.file("x.hfa")).code, 2);
+  EXPECT_EQ(run("info " + d.file("missing.hfa")).code, 2);
+  test::writeText(d.file("junk.hfa"), "not a pack at all, just text that is long enough for a header....");
+  EXPECT_EQ(run("render " + d.file("junk.hfa") + " -o " + d.file("x.png")).code, 2);
+  for (const char* c : {"pack", "render", "info", "bench", "eval"}) EXPECT_EQ(run(std::string(c) + " --help").code, 0) << c;
+}
+
+TEST(Cli, PackInfoBenchEvalJson) {
+  test::TempDir d;
+  writeIcosphere(d.file("ico.ply"));
+  CmdResult p = run("pack " + d.file("ico.ply") + " -o " + d.file("ico.hfa") + " --json");
+  ASSERT_EQ(p.code, 0) << p.out;
+  auto pj = nlohmann::json::parse(p.out);
+  EXPECT_EQ(pj["triangles"].get<int>(), 5120);
+  EXPECT_TRUE(pj["from_triangles"].get<bool>());
+  EXPECT_FALSE(pj["up_to_date"].get<bool>());
+  EXPECT_TRUE(nlohmann::json::parse(run("pack " + d.file("ico.ply") + " -o " + d.file("ico.hfa") + " --json").out)["up_to_date"].get<bool>());
+  auto info = nlohmann::json::parse(run("info " + d.file("ico.hfa") + " --json").out);
+  EXPECT_EQ(info["cells"].get<int>(), pj["cells"].get<int>());
+
+  CmdResult b = run("bench " + d.file("ico.hfa") + " --orbit 4 --size 64x64 --warmup 1 --frames 4 --mode parallax,points "
+              "--iterations 4,12 --compare-skips --json --csv " + d.file("b.csv"));
+  ASSERT_EQ(b.code, 0) << b.out;
+  auto bj = nlohmann::json::parse(b.out);
+  ASSERT_EQ(bj["configs"].size(), 2u + 1u + 6u);  // 2 parallax, points, 6 skip comparisons
+  for (const auto& c : bj["configs"]) {
+    EXPECT_GT(c["cpu_ms"]["median"].get<double>(), 0) << c.dump();
+    EXPECT_GE(c["cpu_ms"]["p99"].get<double>(), c["cpu_ms"]["median"].get<double>());
+    EXPECT_GT(c["fragments"].get<double>(), 0) << c.dump();
+  }
+  std::ifstream csv(d.file("b.csv"));
+  size_t lines = 0;
+  for (std::string l; std::getline(csv, l);) ++lines;
+  EXPECT_EQ(lines, 1u + 9u * 4u);  // header + frames
+
+  CmdResult e = run("eval " + d.file("ico.hfa") + " --reference " + d.file("ico.ply") +
+              " --orbit 3 --size 96x96 --mode parallax,points --iterations 12 --json");
+  ASSERT_EQ(e.code, 0) << e.out;
+  auto ej = nlohmann::json::parse(e.out);
+  ASSERT_EQ(ej["configs"].size(), 2u);
+  const auto& par = ej["configs"][0];
+  EXPECT_EQ(par["mode"], "parallax");
+  EXPECT_GE(par["iou"].get<double>(), 0.99);
+  EXPECT_LE(par["depth_median"].get<double>(), 1e-4);
+  EXPECT_LE(par["normal_median_deg"].get<double>(), 3.0);
+  EXPECT_GE(par["psnr"].get<double>(), 30.0);
+  EXPECT_TRUE(ej["configs"][1]["normal_median_deg"].is_null());  // points: no normals
+}
+
+}  // namespace
+}  // namespace sa
