@@ -25,6 +25,8 @@ const char* kHelp =
     "options:\n"
     "  --path FILE            camera path JSON ({\"cameras\": [{\"eye\", \"target\", \"up\", \"fov\"}, ...]})\n"
     "  --orbit N              N cameras around the bounding box (default 60)\n"
+    "  --zoom F               orbit cameras F times closer (F > 1: close-ups, frustum culling\n"
+    "                         matters; F < 1: far away, boxes shrink below a pixel)\n"
     "  --size WxH             frame size (default 1024x1024)\n"
     "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and 0,1,0)\n"
     "  --warmup N             frames rendered before timing each configuration (default 10)\n"
@@ -76,7 +78,7 @@ std::string summaryJson(const Summary& s) {
 int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"path", "orbit", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "csv"},
+                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "csv"},
                      {"compare-skips", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});

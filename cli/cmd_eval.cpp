@@ -34,7 +34,7 @@ const char* kHelp =
     "options:\n"
     "  --reference FILE       the ground truth (required)\n"
     "  --max-edge X           scan sets: longest grid triangle edge kept (default 3 x median)\n"
-    "  --path FILE | --orbit N   cameras (default --orbit 8)\n"
+    "  --path FILE | --orbit N   cameras (default --orbit 8); --zoom F as for bench\n"
     "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render\n"
     "  --mode LIST            parallax, points (default parallax)\n"
     "  --iterations LIST      parallax step bounds (default 12)\n"
@@ -56,7 +56,7 @@ struct Row {
 int cmdEval(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"reference", "max-edge", "path", "orbit", "size", "fov", "up", "mode", "iterations", "repeat",
+                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "repeat",
                       "csv", "plot"},
                      {"json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {

@@ -22,6 +22,7 @@ const char* kHelp =
     "camera (one of):\n"
     "  --orbit N              N views around the bounding box: OUT_0.png .. OUT_{N-1}.png\n"
     "  --path FILE            the cameras of a camera-path JSON file (one image each, as --orbit)\n"
+    "  --zoom F               orbit cameras F times closer to the centre\n"
     "  --eye X,Y,Z --target X,Y,Z [--up X,Y,Z]   one view (default: looking at the centre)\n"
     "  --fov DEG              vertical field of view (default 40)\n"
     "  --up X,Y,Z             up direction, also the orbit axis (default 0,1,0)\n"
@@ -50,7 +51,7 @@ std::string indexed(const std::string& path, int i) {
 int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "orbit", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
+                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
                       "background"},
                      {"no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});

@@ -56,6 +56,12 @@ Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, 
       n = int(*v);
     }
     out = orbitCameras(lo, hi, n, base.up, base.fovDeg, base.width, base.height);
+    if (a.has("zoom")) {
+      auto z = parseNumber("zoom", a.get("zoom"));
+      if (!z) return z.status();
+      if (*z <= 0) return Status::badInput("--zoom must be positive");
+      for (Camera& c : out) c.eye = c.target + (c.eye - c.target) / *z;
+    }
     return Status::ok();
   }
   Camera c = orbitCameras(lo, hi, 1, base.up, base.fovDeg, base.width, base.height)[0];

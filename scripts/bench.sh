@@ -30,6 +30,13 @@ for m in bunny dragon; do
       --iterations 12 --compare-skips --csv "$out/bench_$m.csv" --json > "$out/bench_$m.json"
   $sa info "$out/$m.hfa" --json > "$out/info_$m.json"
 done
+# Where the skips matter: close-ups (most boxes outside the view) and far views (boxes
+# under a pixel), dragon, 512x512.
+for z in 4 0.05; do
+  echo "== bench dragon --zoom $z" >&2
+  $sa bench "$out/dragon.hfa" --orbit 12 --zoom "$z" --size 512x512 --warmup 2 --frames "$frames" \
+      --iterations 12 --compare-skips --json > "$out/bench_dragon_zoom$z.json"
+done
 /usr/bin/python3 - "$out" <<'PY' > "$out/tables.md"
 import json, sys
 out = sys.argv[1]
@@ -53,6 +60,15 @@ for m in ("bunny", "dragon"):
     for c in be["configs"]:
         print(f"| {c['mode']} | {c['skips']} | {c['cpu_ms']['median']:.1f} | {c['cpu_ms']['p95']:.1f} | {c['cpu_ms']['p99']:.1f} | "
               f"{c['gpu_ms']['median']:.1f} | {c['boxes_drawn']:.0f} | {c['splats']:.0f} | {c['fragments']:.0f} |")
+    print()
+for z in ("4", "0.05"):
+    be = json.load(open(f"{out}/bench_dragon_zoom{z}.json"))
+    print(f"### dragon, orbit --zoom {z} ({be['cameras']} cameras, {be['frames']} frames each, {be['width']}x{be['height']})\n")
+    print("| skips on | cpu ms median | p95 | boxes drawn | culled | splats | fragments |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for c in be["configs"]:
+        print(f"| {c['skips']} | {c['cpu_ms']['median']:.1f} | {c['cpu_ms']['p95']:.1f} | {c['boxes_drawn']:.0f} | "
+              f"{c['boxes_culled']:.0f} | {c['splats']:.0f} | {c['fragments']:.0f} |")
     print()
 PY
 cat "$out/tables.md"
