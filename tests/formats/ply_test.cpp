@@ -137,6 +137,40 @@ TEST(Ply, TriangleStripsDecoded) {
   EXPECT_EQ(c.tris, (std::vector<uint32_t>{0, 1, 2, 2, 1, 3}));
 }
 
+// Range grids triangulate into 2 triangles per complete 2x2 block, 1 where one sample is
+// missing, none where two are.
+TEST(Ply, RangeGridTriangulation) {
+  test::TempDir d;
+  // 3 columns x 3 rows; grid cell (row 2, col 2) empty.
+  test::writeText(d.file("g.ply"),
+                  "ply\nformat ascii 1.0\nobj_info num_cols 3\nobj_info num_rows 3\nelement vertex 8\n"
+                  "property float x\nproperty float y\nproperty float z\nelement range_grid 9\n"
+                  "property list uchar int vertex_indices\nend_header\n"
+                  "0 0 0\n1 0 0\n2 0 0\n0 1 0\n1 1 0\n2 1 0\n0 2 0\n1 2 0\n"
+                  "1 0\n1 1\n1 2\n1 3\n1 4\n1 5\n1 6\n1 7\n0\n");
+  Collect c;
+  PlyReadOptions o;
+  o.rangeGridTriangles = true;
+  ASSERT_TRUE(readPly(d.file("g.ply"), o, c).isOk());
+  // Blocks: (0,0) full -> 2, (0,1) full -> 2, (1,0) full -> 2, (1,1) missing one -> 1.
+  EXPECT_EQ(c.tris.size() / 3, 7u);
+  for (uint32_t v : c.tris) EXPECT_LT(v, 8u);
+  Collect plain;
+  ASSERT_TRUE(readPly(d.file("g.ply"), {}, plain).isOk());
+  EXPECT_TRUE(plain.tris.empty());  // without the option the grid is skipped
+}
+
+TEST(PlyReal, BunnyRangeGridTriangulates) {
+  Collect c;
+  PlyReadOptions o;
+  o.rangeGridTriangles = true;
+  ASSERT_TRUE(readPly(test::sharedData("stanford_bunny/scans/bun000.ply"), o, c).isOk());
+  EXPECT_EQ(c.all.size(), 40256u);
+  // Nearly two triangles per sample on a dense range image.
+  EXPECT_GT(c.tris.size() / 3, 70000u);
+  EXPECT_LT(c.tris.size() / 3, 2u * 40256u);
+}
+
 TEST(Ply, TruncatedFileNamesTheByteOffset) {
   test::TempDir d;
   auto bytes = binaryPly(false);
