@@ -35,6 +35,12 @@ const char* kHelp =
     "  --iterations N         linear ray-march steps per height field (default 12)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
+    "  --shading MODE         lambert (head light, default), normals, height (colour ramp along --up),\n"
+    "                         color (scan colour, the default when the pack has colour)\n"
+    "  --edl                  eye-dome lighting (depth-based relief and outlines)\n"
+    "  --boxes                draw the cells' boxes, coloured by their height axis (decomposition view)\n"
+    "  --clip-box X0,Y0,Z0,X1,Y1,Z1   show only what lies inside this box (world coordinates)\n"
+    "  --section PX,PY,PZ,NX,NY,NZ    show only the side of this plane the normal points to\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
     "                         turn off what a frame skips by default (see scanatlas bench)\n"
     "  --background R,G,B     background colour, 0..1 (default 0.1,0.1,0.12)\n"
@@ -52,8 +58,8 @@ int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
-                      "background"},
-                     {"no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
+                      "background", "shading", "clip-box", "section"},
+                     {"edl", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
@@ -85,6 +91,44 @@ int cmdRender(int argc, char** argv) {
     for (int i = 0; i < 3; ++i) rs.background[i] = float(std::clamp((*v)[i], 0.0, 1.0));
   }
   rs.useColor = !a.flag("no-color");
+  if (a.has("shading")) {
+    const std::string sh = a.get("shading");
+    if (sh == "lambert") rs.shading = Shading::kLambert;
+    else if (sh == "normals") rs.shading = Shading::kNormals;
+    else if (sh == "height") rs.shading = Shading::kHeight;
+    else if (sh == "color" || sh == "colour") rs.useColor = true;
+    else return reportError(Status::badInput("--shading: expected lambert, normals, height or color, got '" + sh + "'"));
+  }
+  rs.up = cams[0].up;
+  rs.edl = a.flag("edl");
+  rs.showBoxes = a.flag("boxes");
+  if (a.has("clip-box")) {
+    const auto v = splitList(a.get("clip-box"));
+    if (v.size() != 6) return reportError(Status::badInput("--clip-box: expected x0,y0,z0,x1,y1,z1"));
+    double n[6];
+    for (int i = 0; i < 6; ++i) {
+      auto x = parseNumber("clip-box", v[size_t(i)]);
+      if (!x) return reportError(x.status());
+      n[i] = *x;
+    }
+    rs.clip.box = true;
+    rs.clip.lo = Eigen::Vector3d(std::min(n[0], n[3]), std::min(n[1], n[4]), std::min(n[2], n[5]));
+    rs.clip.hi = Eigen::Vector3d(std::max(n[0], n[3]), std::max(n[1], n[4]), std::max(n[2], n[5]));
+  }
+  if (a.has("section")) {
+    const auto v = splitList(a.get("section"));
+    if (v.size() != 6) return reportError(Status::badInput("--section: expected px,py,pz,nx,ny,nz"));
+    double n[6];
+    for (int i = 0; i < 6; ++i) {
+      auto x = parseNumber("section", v[size_t(i)]);
+      if (!x) return reportError(x.status());
+      n[i] = *x;
+    }
+    rs.clip.plane = true;
+    rs.clip.point = Eigen::Vector3d(n[0], n[1], n[2]);
+    rs.clip.normal = Eigen::Vector3d(n[3], n[4], n[5]);
+    if (rs.clip.normal.norm() == 0) return reportError(Status::badInput("--section: the normal must not be zero"));
+  }
   rs.cull.frustum = !a.flag("no-frustum-cull");
   rs.cull.backfaceCull = !a.flag("no-backface-cull");
   rs.cull.adaptiveSteps = !a.flag("no-adaptive-steps");

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the tests with AddressSanitizer + UndefinedBehaviorSanitizer into build-asan/ and runs
-# them. Leak checking is on except for the viewer tests (Mesa's llvmpipe keeps allocations
+# them. Leak checking is on except for the tests that create a GL context (Mesa keeps allocations
 # alive until process exit).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,5 +9,7 @@ cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSCANATLAS_
 cmake --build build-asan -j"${JOBS:-2}"
 cd build-asan
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
-ASAN_OPTIONS=detect_leaks=1 ctest --output-on-failure -j"${JOBS:-2}" -E '^(RenderTest|Accuracy)\.'
-ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure -j"${JOBS:-2}" -R '^(RenderTest|Accuracy)\.'
+# Tests that create a GL context (directly or through the scanatlas binary).
+gl='^(RenderTest|Accuracy|Stress|Cli)\.'
+ASAN_OPTIONS=detect_leaks=1 ctest --output-on-failure -j"${JOBS:-2}" -E "$gl"
+ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure -j"${JOBS:-2}" -R "$gl"

@@ -36,6 +36,17 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
   std::vector<double> depthOf(opt.frontToBack ? bounds_.size() : 0);
   for (uint32_t i = 0; i < bounds_.size(); ++i) {
     const Bounds& b = bounds_[i];
+    if (opt.clipBox) {
+      const Eigen::Vector3d nearest = b.center.cwiseMax(opt.clipLo).cwiseMin(opt.clipHi);
+      if ((nearest - b.center).norm() > b.radius) {
+        ++out.culled;
+        continue;
+      }
+    }
+    if (opt.clipPlane && (b.center - opt.planePoint).dot(opt.planeNormal) < -b.radius) {
+      ++out.culled;
+      continue;
+    }
     const Eigen::Vector3d c = b.center - eye;
     const double z = c.dot(f), x = c.dot(r), y = c.dot(u);
     if (opt.frustum) {

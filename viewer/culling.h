@@ -23,6 +23,11 @@ struct CullOptions {
   int maxSteps = 12;
   int minSteps = 4;
   double splatPixels = 1.0;
+  // Clip box and section plane (relative to the pack origin): boxes wholly outside are culled.
+  bool clipBox = false;
+  Eigen::Vector3d clipLo = Eigen::Vector3d::Zero(), clipHi = Eigen::Vector3d::Zero();
+  bool clipPlane = false;
+  Eigen::Vector3d planePoint = Eigen::Vector3d::Zero(), planeNormal = Eigen::Vector3d::UnitZ();
 };
 
 struct DrawItem {

@@ -108,27 +108,36 @@ Result<RenderMode> parseMode(const std::string& name) {
 }
 
 struct Renderer::Gl {
-  GLuint front = 0, inside = 0, splat = 0, points = 0;  // programs
+  GLuint front = 0, inside = 0, splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLsizeiptr itemCapacity = 0;
-  GLuint heightTex = 0, colorTex = 0;
-  GLuint fbo = 0, colorRb = 0, depthRb = 0, linearRb = 0, normalRb = 0;
+  GLuint heightTex = 0, pageColorTex = 0;
+  void releaseTargets() {
+    GLuint fbos[] = {fbo, postFbo};
+    glDeleteFramebuffers(2, fbos);
+    GLuint tex[] = {colorTex, linearTex, postTex};
+    glDeleteTextures(3, tex);
+    GLuint rb[] = {depthRb, normalRb};
+    glDeleteRenderbuffers(2, rb);
+    fbo = postFbo = colorTex = linearTex = postTex = depthRb = normalRb = 0;
+  }
+  GLuint fbo = 0, colorTex = 0, linearTex = 0, depthRb = 0, normalRb = 0;
+  GLuint postFbo = 0, postTex = 0;
+  bool lastWasPost = false;
   GLuint timeQuery = 0, fragQuery = 0;
   GLenum fragTarget = GL_SAMPLES_PASSED;
   GLint ssboAlign = 256;  // GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT
   int fbW = 0, fbH = 0;
   ~Gl() {
-    for (GLuint p : {front, inside, splat, points})
+    for (GLuint p : {front, inside, splat, points, edl, boxes})
       if (p) glDeleteProgram(p);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
     glDeleteBuffers(3, bufs);
-    GLuint tex[] = {heightTex, colorTex};
+    releaseTargets();
+    GLuint tex[] = {heightTex, pageColorTex};
     glDeleteTextures(2, tex);
-    if (fbo) glDeleteFramebuffers(1, &fbo);
-    GLuint rb[] = {colorRb, depthRb, linearRb, normalRb};
-    glDeleteRenderbuffers(4, rb);
     GLuint q[] = {timeQuery, fragQuery};
     glDeleteQueries(2, q);
   }
@@ -154,6 +163,8 @@ Status Renderer::init(const PackReader& pack) {
   SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "", g.inside));
   SA_RETURN_IF_ERROR(link("splat.vert", "splat.frag", "", g.splat));
   SA_RETURN_IF_ERROR(link("points.vert", "points.frag", "", g.points));
+  SA_RETURN_IF_ERROR(link("fullscreen.vert", "edl.frag", "", g.edl));
+  SA_RETURN_IF_ERROR(link("boxes.vert", "boxes.frag", "", g.boxes));
   glCreateVertexArrays(1, &g.vao);
   // glGenQueries, not glCreateQueries: Mesa rejects the pipeline-statistics target there.
   glGenQueries(1, &g.timeQuery);
@@ -205,20 +216,20 @@ Status Renderer::init(const PackReader& pack) {
   glTextureParameteri(g.heightTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
   glTextureParameteri(g.heightTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 2;
-  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.colorTex);
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.pageColorTex);
   if (hasColor_) {
-    glTextureStorage3D(g.colorTex, 1, GL_RGBA8, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
+    glTextureStorage3D(g.pageColorTex, 1, GL_RGBA8, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
     for (uint32_t p = 0; p < m.pageCount; ++p)
-      glTextureSubImage3D(g.colorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
+      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
                           GL_UNSIGNED_BYTE, pack.colorPage(p));
     gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 4;
   } else {
     const uint8_t white[4] = {255, 255, 255, 255};
-    glTextureStorage3D(g.colorTex, 1, GL_RGBA8, 1, 1, 1);
-    glTextureSubImage3D(g.colorTex, 0, 0, 0, 0, 1, 1, 1, GL_RGBA, GL_UNSIGNED_BYTE, white);
+    glTextureStorage3D(g.pageColorTex, 1, GL_RGBA8, 1, 1, 1);
+    glTextureSubImage3D(g.pageColorTex, 0, 0, 0, 0, 1, 1, 1, GL_RGBA, GL_UNSIGNED_BYTE, white);
   }
-  glTextureParameteri(g.colorTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-  glTextureParameteri(g.colorTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTextureParameteri(g.pageColorTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(g.pageColorTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   return Status::ok();
 }
@@ -256,23 +267,33 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     return Status::badInput("points mode: no source points loaded for this pack");
   Gl& g = *gl_;
   if (g.fbW != cam.width || g.fbH != cam.height) {
-    if (g.fbo) glDeleteFramebuffers(1, &g.fbo);
-    GLuint rb[] = {g.colorRb, g.depthRb, g.linearRb, g.normalRb};
-    glDeleteRenderbuffers(4, rb);
-    glCreateFramebuffers(1, &g.fbo);
-    glCreateRenderbuffers(1, &g.colorRb);
+    g.releaseTargets();
+    auto texture = [&](GLenum format) {
+      GLuint t = 0;
+      glCreateTextures(GL_TEXTURE_2D, 1, &t);
+      glTextureStorage2D(t, 1, format, cam.width, cam.height);
+      glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+      glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+      glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+      return t;
+    };
+    g.colorTex = texture(GL_RGBA8);
+    g.linearTex = texture(GL_R32F);
+    g.postTex = texture(GL_RGBA8);
     glCreateRenderbuffers(1, &g.depthRb);
-    glCreateRenderbuffers(1, &g.linearRb);
     glCreateRenderbuffers(1, &g.normalRb);
-    glNamedRenderbufferStorage(g.colorRb, GL_RGBA8, cam.width, cam.height);
-    glNamedRenderbufferStorage(g.linearRb, GL_R32F, cam.width, cam.height);
     glNamedRenderbufferStorage(g.normalRb, GL_RGBA16F, cam.width, cam.height);
     glNamedRenderbufferStorage(g.depthRb, GL_DEPTH_COMPONENT32F, cam.width, cam.height);
-    glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, g.colorRb);
-    glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT1, GL_RENDERBUFFER, g.linearRb);
+    glCreateFramebuffers(1, &g.fbo);
+    glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT0, g.colorTex, 0);
+    glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT1, g.linearTex, 0);
     glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT2, GL_RENDERBUFFER, g.normalRb);
     glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
-    if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    glCreateFramebuffers(1, &g.postFbo);
+    glNamedFramebufferTexture(g.postFbo, GL_COLOR_ATTACHMENT0, g.postTex, 0);
+    if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE ||
+        glCheckNamedFramebufferStatus(g.postFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
       return Status::internal("framebuffer incomplete at " + std::to_string(cam.width) + "x" + std::to_string(cam.height));
     g.fbW = cam.width;
     g.fbH = cam.height;
@@ -297,6 +318,12 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   VisibleSet vis;
   if (s.mode == RenderMode::kParallax) {
     CullOptions co = s.cull;
+    co.clipBox = s.clip.box;
+    co.clipLo = s.clip.lo - origin_;
+    co.clipHi = s.clip.hi - origin_;
+    co.clipPlane = s.clip.plane;
+    co.planePoint = s.clip.point - origin_;
+    co.planeNormal = s.clip.normal.normalized();
     co.maxSteps = std::max(1, s.iterations);
     co.minSteps = std::min(co.minSteps, co.maxSteps);
     culler_->compute(cam, camRel, np, co, vis);
@@ -337,8 +364,23 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.cellBuf);
   glBindTextureUnit(0, g.heightTex);
-  glBindTextureUnit(1, g.colorTex);
+  glBindTextureUnit(1, g.pageColorTex);
   const bool color = s.useColor && hasColor_;
+  // Height ramp and clip geometry, camera-relative (differences formed in double).
+  const Eigen::Vector3d upD = s.up.normalized();
+  const Eigen::Vector3f upF = upD.cast<float>();
+  double hLo = 1e300, hHi = -1e300;
+  for (int k = 0; k < 8; ++k) {
+    const Eigen::Vector3d corner(k & 1 ? boundsMax_.x() : boundsMin_.x(), k & 2 ? boundsMax_.y() : boundsMin_.y(),
+                                 k & 4 ? boundsMax_.z() : boundsMin_.z());
+    const double h = (corner - camRel).dot(upD);
+    hLo = std::min(hLo, h);
+    hHi = std::max(hHi, h);
+  }
+  const float heightLo = float(hLo), heightHi = float(hHi);
+  const Eigen::Vector3f clipLo = (s.clip.lo - cam.eye).cast<float>(), clipHi = (s.clip.hi - cam.eye).cast<float>();
+  const Eigen::Vector3d pn = s.clip.normal.normalized();
+  const Eigen::Vector4f plane(float(pn.x()), float(pn.y()), float(pn.z()), float(-pn.dot(s.clip.point - cam.eye)));
   auto common = [&](GLuint p) {
     glUseProgram(p);
     glUniformMatrix3fv(glGetUniformLocation(p, "viewRotation"), 1, GL_FALSE, rot.data());
@@ -350,6 +392,14 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, fwd.data());
     glUniform1i(glGetUniformLocation(p, "useColor"), color ? 1 : 0);
     glUniform3fv(glGetUniformLocation(p, "baseColor"), 1, s.baseColor);
+    glUniform1i(glGetUniformLocation(p, "shadingMode"), int(s.shading));
+    glUniform3fv(glGetUniformLocation(p, "upAxis"), 1, upF.data());
+    glUniform1f(glGetUniformLocation(p, "heightLo"), heightLo);
+    glUniform1f(glGetUniformLocation(p, "heightHi"), heightHi);
+    glUniform1i(glGetUniformLocation(p, "clipFlags"), (s.clip.box ? 1 : 0) | (s.clip.plane ? 2 : 0));
+    glUniform3fv(glGetUniformLocation(p, "clipBoxMin"), 1, clipLo.data());
+    glUniform3fv(glGetUniformLocation(p, "clipBoxMax"), 1, clipHi.data());
+    glUniform4fv(glGetUniformLocation(p, "clipPlane"), 1, plane.data());
   };
   glBeginQuery(GL_TIME_ELAPSED, g.timeQuery);
   glBeginQuery(g.fragTarget, g.fragQuery);
@@ -370,6 +420,25 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     drawList(vis.inside, g.inside, GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
     glDisable(GL_CULL_FACE);
     drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
+    if (s.showBoxes) {
+      // The decomposition view: every drawn box's edges, depth-tested against the surface.
+      off = 0;
+      const GLenum only0[] = {GL_COLOR_ATTACHMENT0, GL_NONE, GL_NONE};
+      glNamedFramebufferDrawBuffers(g.fbo, 3, only0);
+      glDepthMask(GL_FALSE);
+      glDepthFunc(GL_GEQUAL);
+      common(g.boxes);
+      for (const auto* list : {&vis.front, &vis.inside}) {
+        if (!list->empty()) {
+          glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)));
+          glDrawArraysInstanced(GL_LINES, 0, 24, GLsizei(list->size()));
+        }
+        off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+      }
+      glDepthMask(GL_TRUE);
+      glDepthFunc(GL_GREATER);
+      glNamedFramebufferDrawBuffers(g.fbo, 3, bufs);
+    }
   } else {
     common(g.points);
     const double ty = std::tan(cam.fovDeg * M_PI / 360.0);
@@ -379,6 +448,20 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     glBindVertexArray(g.pointVao);
     glDrawArrays(GL_POINTS, 0, GLsizei(pointCount_));
     st.points = pointCount_;
+  }
+  g.lastWasPost = false;
+  if (s.edl) {
+    glBindFramebuffer(GL_FRAMEBUFFER, g.postFbo);
+    glDisable(GL_DEPTH_TEST);
+    glUseProgram(g.edl);
+    glUniform1f(glGetUniformLocation(g.edl, "strength"), s.edlStrength);
+    glUniform1f(glGetUniformLocation(g.edl, "radius"), s.edlRadius);
+    glBindTextureUnit(0, g.colorTex);
+    glBindTextureUnit(1, g.linearTex);
+    glBindVertexArray(g.vao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glEnable(GL_DEPTH_TEST);
+    g.lastWasPost = true;
   }
   glEndQuery(g.fragTarget);
   glEndQuery(GL_TIME_ELAPSED);
@@ -394,7 +477,9 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
 
   auto readFlipped = [&](GLenum attachment, GLenum format, GLenum type, size_t pixelBytes, void* dst) {
     std::vector<uint8_t> rows(size_t(cam.width) * cam.height * pixelBytes);
-    glNamedFramebufferReadBuffer(g.fbo, attachment);
+    const bool post = attachment == GL_COLOR_ATTACHMENT0 && g.lastWasPost;
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, post ? g.postFbo : g.fbo);
+    glNamedFramebufferReadBuffer(post ? g.postFbo : g.fbo, attachment);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glReadPixels(0, 0, cam.width, cam.height, format, type, rows.data());
     const size_t stride = size_t(cam.width) * pixelBytes;
@@ -419,6 +504,25 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   const GLenum err = glGetError();
   if (err != GL_NO_ERROR) return Status::internal("OpenGL error " + std::to_string(err) + " while rendering");
   return Status::ok();
+}
+
+float Renderer::depthAt(int x, int y) const {
+  const Gl& g = *gl_;
+  if (!g.fbo || x < 0 || y < 0 || x >= g.fbW || y >= g.fbH) return std::numeric_limits<float>::infinity();
+  float d = 0;
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, g.fbo);
+  glNamedFramebufferReadBuffer(g.fbo, GL_COLOR_ATTACHMENT1);
+  glReadPixels(x, g.fbH - 1 - y, 1, 1, GL_RED, GL_FLOAT, &d);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+  return d;
+}
+
+void Renderer::present(int width, int height) const {
+  const Gl& g = *gl_;
+  if (!g.fbo) return;
+  const GLuint src = g.lastWasPost ? g.postFbo : g.fbo;
+  glNamedFramebufferReadBuffer(src, GL_COLOR_ATTACHMENT0);
+  glBlitNamedFramebuffer(src, 0, 0, 0, g.fbW, g.fbH, 0, 0, width, height, GL_COLOR_BUFFER_BIT, GL_NEAREST);
 }
 
 }  // namespace sa

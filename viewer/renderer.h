@@ -21,8 +21,24 @@ enum class RenderMode { kParallax, kPoints };
 const char* modeName(RenderMode m);
 Result<RenderMode> parseMode(const std::string& name);
 
+enum class Shading { kLambert = 0, kNormals = 1, kHeight = 2 };
+
+struct ClipSettings {
+  bool box = false;  // keep only what lies inside [lo, hi] (world coordinates)
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  bool plane = false;  // keep only the side the normal points to
+  Eigen::Vector3d point = Eigen::Vector3d::Zero(), normal = Eigen::Vector3d::UnitZ();
+};
+
 struct RenderSettings {
   RenderMode mode = RenderMode::kParallax;
+  Shading shading = Shading::kLambert;
+  bool edl = false;          // eye-dome lighting post pass
+  float edlStrength = 1.0f;
+  float edlRadius = 1.5f;    // pixels
+  bool showBoxes = false;    // cell boxes as wireframes coloured by orientation
+  Eigen::Vector3d up = Eigen::Vector3d::UnitY();  // axis of the height colour ramp
+  ClipSettings clip;
   int iterations = 12;   // linear search steps (the bound when steps are adaptive)
   int refineSteps = 6;   // bisection steps after the linear search
   bool useColor = true;  // scan colour when the pack has it
@@ -64,6 +80,10 @@ class Renderer {
   Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, bool readDepth) {
     return render(cam, settings, out, kReadColor | (readDepth ? kReadDepth : 0u));
   }
+  // Linear depth at pixel (x, y from the top) of the last frame; +inf where nothing was hit.
+  float depthAt(int x, int y) const;
+  // Copies the last frame to the default framebuffer (window front ends).
+  void present(int width, int height) const;
   uint64_t gpuBytes() const { return gpuBytes_; }
   uint64_t pointBytes() const { return pointCount_ * 16; }
   double nearPlane() const;

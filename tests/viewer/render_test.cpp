@@ -8,6 +8,7 @@
 #include "../common/render_util.h"
 #include "atlas/raycast.h"
 #include "preprocess/pipeline.h"
+#include "viewer/camera_controller.h"
 #include "viewer/egl_context.h"
 #include "viewer/renderer.h"
 
@@ -150,6 +151,75 @@ TEST_F(RenderTest, GeoreferencedOffsetRendersTheSame) {
   EXPECT_GT(both, 1000u);
   EXPECT_LE(differ, both / 200);
   EXPECT_LE(maxDiff, 1e-4 * diag);
+}
+
+// Clip box and section plane discard everything outside; shading modes change the image,
+// not the geometry; eye-dome lighting only darkens.
+TEST_F(RenderTest, ClipSectionAndShadingModes) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(30000, 1.0, Eigen::Vector3d(100, 200, 300), pts, nrm);
+  PackReader p;
+  ASSERT_TRUE(p.open(pack(pts, nrm, "clip")).isOk());
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  CameraController cc;
+  Camera cam;
+  cam.eye = Eigen::Vector3d(100.3, 200.8, 303.4);
+  cam.target = Eigen::Vector3d(100, 200, 300);
+  cam.width = cam.height = 96;
+  FrameResult full, boxed, cut, edl, normals;
+  ASSERT_TRUE(r.render(cam, RenderSettings{}, full, true).isOk());
+  RenderSettings box;
+  box.clip.box = true;
+  box.clip.lo = Eigen::Vector3d(99, 199, 299);
+  box.clip.hi = Eigen::Vector3d(101, 200, 301);  // the lower half in y
+  ASSERT_TRUE(r.render(cam, box, boxed, true).isOk());
+  RenderSettings sec;
+  sec.clip.plane = true;
+  sec.clip.point = Eigen::Vector3d(100.2, 200, 300);
+  sec.clip.normal = Eigen::Vector3d(-1, 0, 0);  // keep x <= 100.2
+  ASSERT_TRUE(r.render(cam, sec, cut, true).isOk());
+  cc = CameraController(cam);
+  size_t nFull = 0, nBox = 0, nCut = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const size_t i = size_t(y) * cam.width + x;
+      nFull += std::isfinite(full.depth[i]);
+      if (std::isfinite(boxed.depth[i])) {
+        ++nBox;
+        const Eigen::Vector3d w = cc.unproject(x + 0.5, y + 0.5, boxed.depth[i]);
+        EXPECT_LE(w.y(), 200.0 + 1e-3);
+      }
+      if (std::isfinite(cut.depth[i])) {
+        ++nCut;
+        const Eigen::Vector3d w = cc.unproject(x + 0.5, y + 0.5, cut.depth[i]);
+        EXPECT_LE(w.x(), 100.2 + 1e-3);
+      }
+    }
+  EXPECT_GT(nBox, nFull / 4);
+  EXPECT_LT(nBox, nFull * 3 / 4);
+  EXPECT_GT(nCut, nFull / 4);
+  EXPECT_LT(nCut, nFull);
+  RenderSettings e;
+  e.edl = true;
+  ASSERT_TRUE(r.render(cam, e, edl, true).isOk());
+  RenderSettings n;
+  n.shading = Shading::kNormals;
+  ASSERT_TRUE(r.render(cam, n, normals, true).isOk());
+  size_t darker = 0, brighter = 0, colourful = 0;
+  for (size_t i = 0; i < full.depth.size(); ++i) {
+    if (!std::isfinite(full.depth[i])) continue;
+    EXPECT_EQ(edl.depth[i], full.depth[i]);
+    EXPECT_EQ(normals.depth[i], full.depth[i]);
+    const int a = full.color.rgba[4 * i], b = edl.color.rgba[4 * i];
+    darker += b < a;
+    brighter += b > a + 1;
+    const uint8_t* c = &normals.color.rgba[4 * i];
+    colourful += std::max({c[0], c[1], c[2]}) - std::min({c[0], c[1], c[2]}) > 40;
+  }
+  EXPECT_EQ(brighter, 0u);
+  EXPECT_GT(darker, 0u);
+  EXPECT_GT(colourful, nFull / 2);
 }
 
 // Scan colours travel from the PLY through pull-push into the colour pages and the image.

@@ -11,6 +11,7 @@
 // never greater than the rasterized one; declaring that keeps early depth rejection.
 #include "heightfield.glsl"
 #include "shading.glsl"
+#include "clip.glsl"
 
 #ifdef FRONT_FACES
 layout(depth_less) out float gl_FragDepth;
@@ -95,11 +96,11 @@ void main() {
   vec3 rel = cellRelativeToCamera(c);
   vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
   float viewDepth = dot(world, viewForward);
-  if (viewDepth <= nearPlane) discard;
+  if (viewDepth <= nearPlane || isClipped(world)) discard;
   gl_FragDepth = nearPlane / viewDepth;  // reverse-Z, matches `projection`
 
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
-  outColor = vec4(shadeLambert(albedo, nWorld, -world), 1.0);
+  outColor = vec4(shade(albedo, nWorld, world), 1.0);
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), 0.0);
 }

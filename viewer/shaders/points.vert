@@ -16,10 +16,12 @@ uniform vec3 baseColor;
 
 out vec3 vColor;
 out float vViewDepth;
+out vec3 vRel;
 
 void main() {
   vec3 rel = (position - camHi) - camLo;
   vViewDepth = dot(rel, viewForward);
+  vRel = rel;
   gl_Position = projection * vec4(viewRotation * rel, 1.0);
   gl_PointSize = clamp(1.5 * spacingPixels / max(vViewDepth, 1e-30), 1.0, 64.0);
   vColor = useColor ? color.rgb : baseColor;

@@ -1,5 +1,28 @@
-// Shading shared by the surface modes: Lambert with a head light.
+// Shading shared by the surface modes.
+uniform int shadingMode;   // 0 Lambert with head light, 1 normals, 2 height colour ramp
+uniform vec3 upAxis;       // world up, for the height ramp
+uniform float heightLo;    // ramp range, heights along upAxis relative to the camera
+uniform float heightHi;
+
 vec3 shadeLambert(vec3 albedo, vec3 normal, vec3 toEye) {
   float ndl = abs(dot(normalize(normal), normalize(toEye)));
   return albedo * (0.12 + 0.88 * ndl);
+}
+
+// A perceptually ordered ramp (blue - cyan - green - yellow - red).
+vec3 heightRamp(float t) {
+  t = clamp(t, 0.0, 1.0);
+  vec3 c = vec3(smoothstep(0.5, 0.8, t), smoothstep(0.0, 0.35, t) * (1.0 - smoothstep(0.8, 1.0, t)),
+                1.0 - smoothstep(0.25, 0.55, t));
+  return c;
+}
+
+// worldRel: the shaded point relative to the camera.
+vec3 shade(vec3 albedo, vec3 normal, vec3 worldRel) {
+  if (shadingMode == 1) return normalize(normal) * 0.5 + 0.5;
+  if (shadingMode == 2) {
+    float t = (dot(worldRel, upAxis) - heightLo) / max(heightHi - heightLo, 1e-30);
+    return shadeLambert(heightRamp(t), normal, -worldRel);
+  }
+  return shadeLambert(albedo, normal, -worldRel);
 }

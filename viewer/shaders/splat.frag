@@ -1,8 +1,9 @@
 #version 450 core
 #include "shading.glsl"
+#include "clip.glsl"
 
 flat in vec3 vNormal;
-flat in vec3 vToEye;
+flat in vec3 vToEye;   // minus the splat's camera-relative position
 flat in vec3 vColor;
 in float vViewDepth;
 
@@ -11,7 +12,8 @@ layout(location = 1) out float outDepth;
 layout(location = 2) out vec4 outNormal;
 
 void main() {
-  outColor = vec4(shadeLambert(vColor, vNormal, vToEye), 1.0);
+  if (isClipped(-vToEye)) discard;
+  outColor = vec4(shade(vColor, vNormal, -vToEye), 1.0);
   outDepth = vViewDepth;
   outNormal = vec4(normalize(vNormal), 0.0);
 }
