@@ -22,6 +22,12 @@ class PackWriter {
   // Writes one tile (tileW x tileH, row-major) and its gutter. `rgba` may be null when the
   // pack has no colour. Thread-safe for different cells.
   Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* rgba);
+  // Widens a cell's height range before its tile is written (not thread-safe for the same
+  // cell; different cells may be updated concurrently).
+  void setCellHeights(uint32_t cellIndex, double wMin, double wMax) {
+    cells_[cellIndex].box[4] = wMin;
+    cells_[cellIndex].box[5] = wMax;
+  }
   // Updates META (e.g. timings) before finish().
   void setMeta(const PackMeta& meta) {
     const uint32_t cells = meta_.cellCount;

@@ -15,6 +15,7 @@ const char* kUsage =
     "\n"
     "commands:\n"
     "  pack    convert scans (PLY, Stanford .conf scan sets) into a pack file (.hfa)\n"
+    "  view    the interactive window (a scan is packed into a cache beside it first)\n"
     "  render  render views of a pack headless to PNG (and depth to PFM)\n"
     "  info    describe a pack: cells, levels, texels, bytes, bounds, timings\n"
     "  bench   frame times over a camera path, per mode and setting (GPU and CPU time, boxes, fragments)\n"
@@ -66,6 +67,7 @@ int main(int argc, char** argv) {
   const std::string cmd = argv[1];
   if (cmd == "pack") return sa::cmdPack(argc - 2, argv + 2);
   if (cmd == "render") return sa::cmdRender(argc - 2, argv + 2);
+  if (cmd == "view") return sa::cmdView(argc - 2, argv + 2);
   if (cmd == "info") return sa::cmdInfo(argc - 2, argv + 2);
   if (cmd == "bench") return sa::cmdBench(argc - 2, argv + 2);
   if (cmd == "eval") return sa::cmdEval(argc - 2, argv + 2);

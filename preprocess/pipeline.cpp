@@ -268,12 +268,15 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
     area += (c.ext[1] - c.ext[0] + 2 * padUV + t) * (c.ext[3] - c.ext[2] + 2 * padUV + t);
   if (opt.texelSize <= 0) t = std::max(t, std::sqrt(area / double(opt.texelBudget)));
   const uint32_t maxTile = opt.maxPageSize - 2;
+  // Triangles that touch a cell reach up to an edge length past its vertices: pad the tile
+  // by that much (about 1.5 sample spacings) so neighbouring cells' coverage overlaps.
+  double triPad = std::max(t, 1.5 * sum.spacing);
   std::vector<TileSize> sizes(cells.size());
   for (int iter = 0; iter < 40; ++iter) {
     uint64_t texels = 0;
     for (size_t i = 0; i < cells.size(); ++i) {
       const WorkCell& c = cells[i];
-      const double pad = triangles ? t : padUV;
+      const double pad = triangles ? triPad : padUV;
       const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
       sizes[i].w = static_cast<uint32_t>(std::clamp(std::ceil(eu / t), 1.0, double(maxTile)));
       sizes[i].h = static_cast<uint32_t>(std::clamp(std::ceil(ev / t), 1.0, double(maxTile)));
@@ -282,6 +285,7 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
     sum.texels = texels;
     if (texels <= opt.texelBudget || opt.texelSize > 0) break;
     t *= std::sqrt(double(texels) / double(opt.texelBudget)) * 1.01;
+    triPad = std::max(t, 1.5 * sum.spacing);
   }
   sum.texelSize = t;
   uint64_t withGutters = 0;
@@ -296,7 +300,7 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   for (size_t i = 0; i < cells.size(); ++i) {
     WorkCell& c = cells[i];
     CellRecord& r = c.rec;
-    const double pad = triangles ? t : padUV;
+    const double pad = triangles ? triPad : padUV;
     const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
     // The tile spans the box exactly: widen the box to whole texels, centred on the points.
     const double su = std::max(sizes[i].w * t, eu), sv = std::max(sizes[i].h * t, ev);
@@ -391,7 +395,7 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
       for (size_t m = rr.begin(); m < rr.end(); ++m) {
         const uint32_t id = mine[m];
         const WorkCell& c = cells[id];
-        const CellRecord& r = records[id];
+        CellRecord& r = records[id];
         const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
         TileGrid g;
         g.width = r.tileW;
@@ -413,6 +417,20 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
               tri.push_back(d.dot(Wn));
             }
           }
+          // The box's height range grows to hold the whole of every triangle touching the
+          // cell (within the padding), so the parts of those triangles outside the cell's
+          // own vertices are not cut where the neighbouring box does not reach either.
+          double wLo = r.box[4], wHi = r.box[5];
+          const double reach = std::max(r.box[1] - r.box[0], r.box[3] - r.box[2]);
+          for (size_t k = 2; k < tri.size(); k += 3) {
+            wLo = std::min(wLo, std::max(tri[k], r.box[4] - reach));
+            wHi = std::max(wHi, std::min(tri[k], r.box[5] + reach));
+          }
+          r.box[4] = wLo;
+          r.box[5] = wHi;
+          g.wMin = wLo;
+          g.wMax = wHi;
+          writer.setCellHeights(id, wLo, wHi);
           rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * t, tile);
         } else {
           u.resize(c.count); v.resize(c.count); w.resize(c.count);

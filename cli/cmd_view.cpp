@@ -1,0 +1,68 @@
+#include <cstdio>
+#include <filesystem>
+
+#include "cli/args.h"
+#include "cli/commands.h"
+#include "preprocess/pipeline.h"
+#include "window/viewer_app.h"
+
+namespace sa {
+
+int cmdView(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv, {"script", "measurements", "size"}, {"no-vsync", "quiet", "help"},
+                     {{"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::printf(
+        "usage: scanatlas view PACK.hfa | SCAN.ply|SCANS.conf [options]\n"
+        "\n"
+        "The interactive window: orbit, pan, zoom to cursor, fly, pick and measure, clip box and\n"
+        "section plane, shading modes with eye-dome lighting, the cell-box view, bookmarks and\n"
+        "screenshots. A scan (not a pack) is packed first into a cache beside it (SCAN.hfa, reused\n"
+        "while the input and options are unchanged). Press H in the window for the keys.\n"
+        "\n"
+        "options:\n"
+        "  --size WxH             window size (default 1280x800)\n"
+        "  --no-vsync             render as fast as possible\n"
+        "  --script FILE          replay a session (below), then close\n"
+        "  --measurements FILE    picks and measurements as CSV (default: stdout)\n"
+        "\n%s",
+        kViewerScriptHelp);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().size() != 1) return reportError(Status::badInput("view: give one pack or scan (see --help)"));
+  ViewerOptions opt;
+  opt.scriptPath = a.get("script");
+  opt.measurementsPath = a.get("measurements");
+  opt.vsync = !a.flag("no-vsync");
+  opt.quiet = a.flag("quiet");
+  if (a.has("size")) {
+    s = parseWxH("size", a.get("size"), opt.width, opt.height);
+    if (!s) return reportError(s);
+  }
+  std::string path = a.positionals()[0];
+  const std::string ext = std::filesystem::path(path).extension().string();
+  if (ext != ".hfa") {
+    auto input = InputSet::open({path});
+    if (!input) return reportError(input.status());
+    const std::string cache = (std::filesystem::path(path).parent_path() /
+                               (std::filesystem::path(path).stem().string() + ".hfa")).string();
+    PackSummary sum;
+    PackOptions po;
+    po.commandLine = "view " + path;
+    if (!opt.quiet) std::fprintf(stderr, "view: packing %s into %s...\n", path.c_str(), cache.c_str());
+    s = packInput(*input, cache, po,
+                  [&](const char* phase, uint64_t done, uint64_t total) {
+                    if (!opt.quiet && total && (done == total))
+                      std::fprintf(stderr, "  %s done (%llu points)\n", phase, (unsigned long long)total);
+                  },
+                  sum);
+    if (!s) return reportError(s);
+    if (!opt.quiet && sum.upToDate) std::fprintf(stderr, "view: %s is up to date\n", cache.c_str());
+    path = cache;
+  }
+  return runViewer(path, opt);
+}
+
+}  // namespace sa

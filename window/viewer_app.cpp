@@ -1,0 +1,555 @@
+#include "window/viewer_app.h"
+
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/glcorearb.h>
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+#include <imgui_impl_glfw.h>
+#include <imgui_impl_opengl3.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <vector>
+
+#include "atlas/pack_file.h"
+#include "viewer/camera_controller.h"
+#include "viewer/camera_path.h"
+#include "viewer/renderer.h"
+
+namespace sa {
+
+const char* kViewerScriptHelp =
+    "Script commands (one per line, '#' comments; each runs on its own frame):\n"
+    "  size W H                       resize the window\n"
+    "  camera EX EY EZ TX TY TZ [UX UY UZ [FOV]]   set the camera (world coordinates)\n"
+    "  orbit DX DY | pan DX DY        drag by pixels (orbit about the pivot)\n"
+    "  zoom PX PY FACTOR              zoom toward pixel (PX, PY); FACTOR < 1 moves closer\n"
+    "  frame | top | front | side     frame all / preset views\n"
+    "  pick PX PY                     pick the surface at a pixel (added to the measurement)\n"
+    "  distance | polyline | height   report the last two picks' distance, the polyline length\n"
+    "                                 over all picks, the last two picks' height difference\n"
+    "  clear                          forget the picks\n"
+    "  clip box X0 Y0 Z0 X1 Y1 Z1 | clip plane PX PY PZ NX NY NZ | clip off\n"
+    "  shading lambert|normals|height|color | edl on|off | boxes on|off | iterations N\n"
+    "  screenshot FILE.png            the current view at window resolution\n"
+    "  windowshot FILE.png            the whole window, panel included\n"
+    "  bookmark                       append the camera to PACK.views.json\n"
+    "  wait N                         render N frames\n"
+    "  quit\n";
+
+namespace {
+
+struct Pick {
+  Eigen::Vector3d p;
+};
+
+struct AppState {
+  PackReader pack;
+  std::unique_ptr<Renderer> renderer = std::make_unique<Renderer>();  // reset before the context goes
+  CameraController cc;
+  RenderSettings rs;
+  Eigen::Vector3d lo, hi, pivot;
+  std::vector<Pick> picks;
+  std::vector<std::string> results;  // measurement log lines (CSV)
+  std::deque<float> frameMs;
+  FrameStats stats;
+  bool showHelp = false, useColorChoice = true;
+  int shadingChoice = 0;
+  float clipBox[6] = {0, 0, 0, 1, 1, 1};  // fractions of the bounds
+  bool clipBoxOn = false, sectionOn = false;
+  int sectionAxis = 0;
+  float sectionAt = 0.5f;
+  std::string status;
+  std::string packPath;
+  std::string pendingWindowShot;
+  std::FILE* measureOut = stdout;
+};
+
+void logResult(AppState& s, const std::string& line) {
+  s.results.push_back(line);
+  std::fprintf(s.measureOut, "%s\n", line.c_str());
+  std::fflush(s.measureOut);
+}
+
+bool pickAt(AppState& s, double px, double py, Eigen::Vector3d& out) {
+  const float d = s.renderer->depthAt(int(px), int(py));
+  if (!std::isfinite(d)) return false;
+  // The renderer's depth is for the pixel centre: unproject that exact ray.
+  out = s.cc.unproject(std::floor(px) + 0.5, std::floor(py) + 0.5, d);
+  return true;
+}
+
+void addPick(AppState& s, double px, double py) {
+  Eigen::Vector3d p;
+  if (!pickAt(s, px, py, p)) {
+    s.status = "nothing under the cursor";
+    logResult(s, "pick,miss," + std::to_string(px) + "," + std::to_string(py));
+    return;
+  }
+  s.picks.push_back({p});
+  char buf[256];
+  std::snprintf(buf, sizeof(buf), "pick,%zu,%.6f,%.6f,%.6f", s.picks.size() - 1, p.x(), p.y(), p.z());
+  logResult(s, buf);
+  s.status = buf;
+}
+
+void measure(AppState& s, const std::string& what) {
+  char buf[256];
+  if (what == "distance" || what == "height") {
+    if (s.picks.size() < 2) {
+      s.status = "pick two points first";
+      return;
+    }
+    const Eigen::Vector3d a = s.picks[s.picks.size() - 2].p, b = s.picks.back().p;
+    const double v = what == "distance" ? (b - a).norm() : (b - a).dot(s.rs.up.normalized());
+    std::snprintf(buf, sizeof(buf), "%s,%zu,%zu,%.9g", what.c_str(), s.picks.size() - 2, s.picks.size() - 1, v);
+  } else {
+    double len = 0;
+    for (size_t i = 1; i < s.picks.size(); ++i) len += (s.picks[i].p - s.picks[i - 1].p).norm();
+    std::snprintf(buf, sizeof(buf), "polyline,%zu,%.9g", s.picks.size(), len);
+  }
+  logResult(s, buf);
+  s.status = buf;
+}
+
+void applyClip(AppState& s) {
+  s.rs.clip.box = s.clipBoxOn;
+  const Eigen::Vector3d ext = s.hi - s.lo;
+  for (int a = 0; a < 3; ++a) {
+    s.rs.clip.lo[a] = s.lo[a] + ext[a] * std::min(s.clipBox[a], s.clipBox[a + 3]);
+    s.rs.clip.hi[a] = s.lo[a] + ext[a] * std::max(s.clipBox[a], s.clipBox[a + 3]);
+  }
+  s.rs.clip.plane = s.sectionOn;
+  s.rs.clip.normal = Eigen::Vector3d::Zero();
+  s.rs.clip.normal[s.sectionAxis] = -1;
+  s.rs.clip.point = s.lo + ext * 0.5;
+  s.rs.clip.point[s.sectionAxis] = s.lo[s.sectionAxis] + ext[s.sectionAxis] * s.sectionAt;
+}
+
+Status screenshot(AppState& s, const std::string& path) {
+  FrameResult fr;
+  SA_RETURN_IF_ERROR(s.renderer->render(s.cc.camera(), s.rs, fr, kReadColor));
+  SA_RETURN_IF_ERROR(writePng(path, fr.color));
+  s.status = "saved " + path;
+  return Status::ok();
+}
+
+Status bookmark(AppState& s) {
+  const std::string path = s.packPath + ".views.json";
+  std::vector<Camera> cams;
+  if (std::filesystem::exists(path)) {
+    auto old = readCameraPath(path, s.cc.camera().width, s.cc.camera().height);
+    if (old) cams = *old;
+  }
+  cams.push_back(s.cc.camera());
+  SA_RETURN_IF_ERROR(writeCameraPath(path, cams));
+  s.status = "bookmark " + std::to_string(cams.size()) + " saved to " + path;
+  return Status::ok();
+}
+
+// Runs one script line. Returns false on `quit`.
+Status runCommand(AppState& s, GLFWwindow* win, const std::string& line, bool& quit, int& waitFrames) {
+  std::istringstream is(line);
+  std::string cmd;
+  if (!(is >> cmd) || cmd[0] == '#') return Status::ok();
+  std::vector<double> v;
+  std::vector<std::string> words;
+  for (std::string w; is >> w;) {
+    words.push_back(w);
+    char* end = nullptr;
+    const double x = std::strtod(w.c_str(), &end);
+    if (end && *end == '\0') v.push_back(x);
+  }
+  auto need = [&](size_t n) {
+    return v.size() >= n ? Status::ok() : Status::badInput("script: '" + line + "': expected " + std::to_string(n) + " numbers");
+  };
+  Camera& cam = s.cc.camera();
+  if (cmd == "quit") {
+    quit = true;
+  } else if (cmd == "size") {
+    SA_RETURN_IF_ERROR(need(2));
+    glfwSetWindowSize(win, int(v[0]), int(v[1]));
+    waitFrames = 2;
+  } else if (cmd == "camera") {
+    SA_RETURN_IF_ERROR(need(6));
+    cam.eye = Eigen::Vector3d(v[0], v[1], v[2]);
+    cam.target = Eigen::Vector3d(v[3], v[4], v[5]);
+    if (v.size() >= 9) cam.up = Eigen::Vector3d(v[6], v[7], v[8]);
+    if (v.size() >= 10) cam.fovDeg = v[9];
+    s.pivot = cam.target;
+    SA_RETURN_IF_ERROR(cam.validate());
+  } else if (cmd == "orbit") {
+    SA_RETURN_IF_ERROR(need(2));
+    s.cc.orbit(s.pivot, v[0], v[1]);
+  } else if (cmd == "pan") {
+    SA_RETURN_IF_ERROR(need(2));
+    s.cc.pan(v[0], v[1], (s.pivot - cam.eye).dot(cam.forward()));
+  } else if (cmd == "zoom") {
+    SA_RETURN_IF_ERROR(need(3));
+    const float d = s.renderer->depthAt(int(v[0]), int(v[1]));
+    s.cc.zoomToCursor(v[0], v[1], std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward()), v[2]);
+  } else if (cmd == "frame") {
+    s.cc.frameAll(s.lo, s.hi);
+  } else if (cmd == "top" || cmd == "front" || cmd == "side") {
+    s.cc.preset(cmd == "top" ? CameraController::Preset::kTop
+                : cmd == "front" ? CameraController::Preset::kFront : CameraController::Preset::kSide, s.lo, s.hi);
+  } else if (cmd == "pick") {
+    SA_RETURN_IF_ERROR(need(2));
+    addPick(s, v[0], v[1]);
+  } else if (cmd == "distance" || cmd == "polyline" || cmd == "height") {
+    measure(s, cmd);
+  } else if (cmd == "clear") {
+    s.picks.clear();
+  } else if (cmd == "clip") {
+    if (words.empty()) return Status::badInput("script: clip box|plane|off");
+    if (words[0] == "off") {
+      s.rs.clip = ClipSettings{};
+    } else if (words[0] == "box" && v.size() >= 6) {
+      s.rs.clip.box = true;
+      s.rs.clip.lo = Eigen::Vector3d(v[0], v[1], v[2]).cwiseMin(Eigen::Vector3d(v[3], v[4], v[5]));
+      s.rs.clip.hi = Eigen::Vector3d(v[0], v[1], v[2]).cwiseMax(Eigen::Vector3d(v[3], v[4], v[5]));
+    } else if (words[0] == "plane" && v.size() >= 6) {
+      s.rs.clip.plane = true;
+      s.rs.clip.point = Eigen::Vector3d(v[0], v[1], v[2]);
+      s.rs.clip.normal = Eigen::Vector3d(v[3], v[4], v[5]);
+    } else {
+      return Status::badInput("script: '" + line + "': clip box X0 Y0 Z0 X1 Y1 Z1 | clip plane PX PY PZ NX NY NZ | clip off");
+    }
+  } else if (cmd == "shading" && !words.empty()) {
+    const std::string m = words[0];
+    s.rs.useColor = m == "color";
+    s.rs.shading = m == "normals" ? Shading::kNormals : m == "height" ? Shading::kHeight : Shading::kLambert;
+  } else if (cmd == "edl" && !words.empty()) {
+    s.rs.edl = words[0] == "on";
+  } else if (cmd == "boxes" && !words.empty()) {
+    s.rs.showBoxes = words[0] == "on";
+  } else if (cmd == "iterations") {
+    SA_RETURN_IF_ERROR(need(1));
+    s.rs.iterations = std::max(1, int(v[0]));
+  } else if (cmd == "screenshot" && !words.empty()) {
+    SA_RETURN_IF_ERROR(screenshot(s, words[0]));
+  } else if (cmd == "windowshot" && !words.empty()) {
+    s.pendingWindowShot = words[0];
+  } else if (cmd == "bookmark") {
+    SA_RETURN_IF_ERROR(bookmark(s));
+  } else if (cmd == "wait") {
+    SA_RETURN_IF_ERROR(need(1));
+    waitFrames = int(v[0]);
+  } else {
+    return Status::badInput("script: unknown command '" + line + "'");
+  }
+  return Status::ok();
+}
+
+void drawPanel(AppState& s, GLFWwindow* win) {
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowSize(ImVec2(330, 560), ImGuiCond_FirstUseEver);
+  ImGui::Begin("ScanAtlas");
+  std::vector<float> ft(s.frameMs.begin(), s.frameMs.end());
+  const float last = ft.empty() ? 0.f : ft.back();
+  ImGui::Text("%.1f ms  %.1f fps", last, last > 0 ? 1000.f / last : 0.f);
+  if (!ft.empty()) ImGui::PlotLines("##ft", ft.data(), int(ft.size()), 0, "frame ms", 0.f, 100.f, ImVec2(300, 50));
+  ImGui::Text("boxes %u drawn, %u culled, %u splats", s.stats.drawn, s.stats.culled, s.stats.splats);
+  ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
+  if (ImGui::CollapsingHeader("Surface", ImGuiTreeNodeFlags_DefaultOpen)) {
+    ImGui::SliderInt("iterations", &s.rs.iterations, 1, 64);
+    ImGui::Checkbox("frustum cull", &s.rs.cull.frustum);
+    ImGui::SameLine();
+    ImGui::Checkbox("adaptive steps", &s.rs.cull.adaptiveSteps);
+    ImGui::Checkbox("back-face cull", &s.rs.cull.backfaceCull);
+    ImGui::SameLine();
+    ImGui::Checkbox("splats", &s.rs.cull.subpixelSplats);
+    ImGui::Checkbox("cell boxes (coloured by plane orientation)", &s.rs.showBoxes);
+  }
+  if (ImGui::CollapsingHeader("Shading", ImGuiTreeNodeFlags_DefaultOpen)) {
+    const char* modes[] = {"Lambert, head light", "normals", "height ramp", "scan colour"};
+    if (ImGui::Combo("shading", &s.shadingChoice, modes, 4)) {
+      s.rs.useColor = s.shadingChoice == 3;
+      s.rs.shading = s.shadingChoice == 1 ? Shading::kNormals : s.shadingChoice == 2 ? Shading::kHeight : Shading::kLambert;
+    }
+    ImGui::Checkbox("eye-dome lighting", &s.rs.edl);
+    if (s.rs.edl) ImGui::SliderFloat("EDL strength", &s.rs.edlStrength, 0.1f, 5.f);
+    ImGui::ColorEdit3("background", s.rs.background);
+  }
+  if (ImGui::CollapsingHeader("Clip")) {
+    bool changed = ImGui::Checkbox("clip box", &s.clipBoxOn);
+    changed |= ImGui::SliderFloat3("min", s.clipBox, 0.f, 1.f);
+    changed |= ImGui::SliderFloat3("max", s.clipBox + 3, 0.f, 1.f);
+    changed |= ImGui::Checkbox("section plane", &s.sectionOn);
+    const char* axes[] = {"x", "y", "z"};
+    changed |= ImGui::Combo("axis", &s.sectionAxis, axes, 3);
+    changed |= ImGui::SliderFloat("at", &s.sectionAt, 0.f, 1.f);
+    if (changed) applyClip(s);
+  }
+  if (ImGui::CollapsingHeader("Measure", ImGuiTreeNodeFlags_DefaultOpen)) {
+    ImGui::TextWrapped("P: pick under the cursor. Double-click: set the orbit pivot.");
+    for (size_t i = 0; i < s.picks.size(); ++i)
+      ImGui::Text("%zu: %.4f %.4f %.4f", i, s.picks[i].p.x(), s.picks[i].p.y(), s.picks[i].p.z());
+    if (ImGui::Button("distance")) measure(s, "distance");
+    ImGui::SameLine();
+    if (ImGui::Button("polyline")) measure(s, "polyline");
+    ImGui::SameLine();
+    if (ImGui::Button("height")) measure(s, "height");
+    ImGui::SameLine();
+    if (ImGui::Button("clear")) s.picks.clear();
+    if (ImGui::Button("export CSV")) {
+      const std::string path = s.packPath + ".measurements.csv";
+      std::string text;
+      for (const auto& r : s.results) text += r + "\n";
+      Status st = writeFileAtomic(path, text.data(), text.size());
+      s.status = st ? "wrote " + path : st.message();
+    }
+  }
+  if (ImGui::CollapsingHeader("Views")) {
+    if (ImGui::Button("bookmark view (B)")) {
+      Status st = bookmark(s);
+      if (!st) s.status = st.message();
+    }
+    ImGui::SameLine();
+    if (ImGui::Button("screenshot (F12)")) {
+      Status st = screenshot(s, s.packPath + ".screenshot.png");
+      if (!st) s.status = st.message();
+    }
+    static bool vsync = true;
+    if (ImGui::Checkbox("vsync", &vsync)) glfwSwapInterval(vsync ? 1 : 0);
+  }
+  if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
+  ImGui::End();
+  if (s.showHelp) {
+    ImGui::SetNextWindowPos(ImVec2(360, 10), ImGuiCond_FirstUseEver);
+    ImGui::Begin("Keys (H)", &s.showHelp);
+    ImGui::TextUnformatted(
+        "left drag      orbit about the pivot\n"
+        "middle / shift-drag   pan\n"
+        "wheel          zoom toward the cursor\n"
+        "double-click   set the pivot on the surface\n"
+        "W A S D Q E    fly (shift: faster)\n"
+        "F              frame all\n"
+        "1 / 3 / 7      front / side / top view\n"
+        "P              pick a point (measure)\n"
+        "B              bookmark the view\n"
+        "F12            screenshot\n"
+        "H              this help\n"
+        "Esc            clear picks");
+    ImGui::End();
+  }
+  (void)win;
+}
+
+}  // namespace
+
+int runViewer(const std::string& packPath, const ViewerOptions& opt) {
+  AppState s;
+  s.packPath = packPath;
+  Status st = s.pack.open(packPath);
+  if (!st) {
+    std::fprintf(stderr, "scanatlas: error: %s\n(run 'scanatlas info' on it, or repack)\n", st.message().c_str());
+    return 2;
+  }
+  std::vector<std::string> script;
+  if (!opt.scriptPath.empty()) {
+    std::ifstream in(opt.scriptPath);
+    if (!in) {
+      std::fprintf(stderr, "scanatlas: error: %s: cannot open script\n", opt.scriptPath.c_str());
+      return 2;
+    }
+    for (std::string l; std::getline(in, l);) script.push_back(l);
+  }
+  if (!opt.measurementsPath.empty()) {
+    s.measureOut = std::fopen(opt.measurementsPath.c_str(), "w");
+    if (!s.measureOut) {
+      std::fprintf(stderr, "scanatlas: error: %s: cannot write measurements\n", opt.measurementsPath.c_str());
+      return 2;
+    }
+  }
+  if (!glfwInit()) {
+    std::fprintf(stderr, "scanatlas: error: cannot open a window (no display?). Headless: scanatlas render\n");
+    return 1;
+  }
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 5);
+  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+  glfwWindowHint(GLFW_SCALE_TO_MONITOR, GLFW_TRUE);
+  const std::string title = "ScanAtlas — " + std::filesystem::path(packPath).filename().string();
+  GLFWwindow* win = glfwCreateWindow(opt.width, opt.height, title.c_str(), nullptr, nullptr);
+  if (!win) {
+    const char* desc = nullptr;
+    glfwGetError(&desc);
+    std::fprintf(stderr, "scanatlas: error: cannot create an OpenGL 4.5 core window: %s\n", desc ? desc : "unknown");
+    glfwTerminate();
+    return 1;
+  }
+  glfwMakeContextCurrent(win);
+  glfwSwapInterval(opt.vsync && script.empty() ? 1 : 0);
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  ImGui::GetIO().IniFilename = nullptr;
+  ImGui_ImplGlfw_InitForOpenGL(win, true);
+  ImGui_ImplOpenGL3_Init("#version 450");
+  int rc = 0;
+  st = s.renderer->init(s.pack);
+  if (!st) {
+    std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
+    rc = 1;
+  }
+  const PackMeta& m = s.pack.meta();
+  const Eigen::Vector3d origin(m.origin);
+  s.lo = origin + Eigen::Vector3d(m.boundsMin);
+  s.hi = origin + Eigen::Vector3d(m.boundsMax);
+  int fbw, fbh;
+  glfwGetFramebufferSize(win, &fbw, &fbh);
+  s.cc = CameraController(orbitCameras(s.lo, s.hi, 1, Eigen::Vector3d::UnitY(), 40, std::max(fbw, 1), std::max(fbh, 1))[0]);
+  s.pivot = s.cc.camera().target;
+  size_t scriptLine = 0;
+  int waitFrames = 0;
+  bool quit = rc != 0;
+  double lastX = 0, lastY = 0, lastClick = -1;
+  bool dragging = false, panning = false;
+  double dragDepth = 1;
+  auto lastTime = std::chrono::steady_clock::now();
+  const double diag = (s.hi - s.lo).norm();
+  while (!quit && !glfwWindowShouldClose(win)) {
+    glfwPollEvents();
+    glfwGetFramebufferSize(win, &fbw, &fbh);
+    if (fbw <= 0 || fbh <= 0) continue;
+    int ww, wh;
+    glfwGetWindowSize(win, &ww, &wh);
+    const double scale = ww > 0 ? double(fbw) / ww : 1.0;  // high-DPI: cursor in window units
+    s.cc.setViewport(fbw, fbh);
+    const auto now = std::chrono::steady_clock::now();
+    const double dt = std::chrono::duration<double>(now - lastTime).count();
+    lastTime = now;
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    ImGuiIO& io = ImGui::GetIO();
+    double mx, my;
+    glfwGetCursorPos(win, &mx, &my);
+    mx *= scale;
+    my *= scale;
+    const Camera& cam = s.cc.camera();
+    if (!io.WantCaptureMouse) {
+      const bool left = glfwGetMouseButton(win, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS;
+      const bool middle = glfwGetMouseButton(win, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS;
+      const bool shift = glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS;
+      if ((left || middle) && !dragging && !panning) {
+        panning = middle || shift;
+        dragging = !panning;
+        const float d = s.renderer->depthAt(int(mx), int(my));
+        dragDepth = std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward());
+        if (left && !shift) {
+          const double t = glfwGetTime();
+          if (t - lastClick < 0.3) {
+            Eigen::Vector3d p;
+            if (pickAt(s, mx, my, p)) {
+              s.pivot = p;
+              s.status = "pivot set";
+            }
+          }
+          lastClick = t;
+        }
+      } else if (dragging && left) {
+        s.cc.orbit(s.pivot, mx - lastX, my - lastY);
+      } else if (panning && (left || middle)) {
+        s.cc.pan(mx - lastX, my - lastY, dragDepth);
+      }
+      if (!left && !middle) dragging = panning = false;
+      if (io.MouseWheel != 0) {
+        const float d = s.renderer->depthAt(int(mx), int(my));
+        const double depth = std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward());
+        s.cc.zoomToCursor(mx, my, depth, std::pow(0.85, io.MouseWheel));
+      }
+    }
+    lastX = mx;
+    lastY = my;
+    if (!io.WantCaptureKeyboard) {
+      const double speed = diag * 0.3 * dt * (glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS ? 4 : 1);
+      auto key = [&](int k) { return glfwGetKey(win, k) == GLFW_PRESS; };
+      s.cc.fly(speed * (key(GLFW_KEY_W) - key(GLFW_KEY_S)), speed * (key(GLFW_KEY_D) - key(GLFW_KEY_A)),
+               speed * (key(GLFW_KEY_E) - key(GLFW_KEY_Q)));
+      if (ImGui::IsKeyPressed(ImGui::GetKeyIndex(ImGuiKey_Escape))) s.picks.clear();
+      if (ImGui::IsKeyPressed(GLFW_KEY_F)) s.cc.frameAll(s.lo, s.hi);
+      if (ImGui::IsKeyPressed(GLFW_KEY_H)) s.showHelp = !s.showHelp;
+      if (ImGui::IsKeyPressed(GLFW_KEY_1) || ImGui::IsKeyPressed(GLFW_KEY_KP_1)) s.cc.preset(CameraController::Preset::kFront, s.lo, s.hi);
+      if (ImGui::IsKeyPressed(GLFW_KEY_3) || ImGui::IsKeyPressed(GLFW_KEY_KP_3)) s.cc.preset(CameraController::Preset::kSide, s.lo, s.hi);
+      if (ImGui::IsKeyPressed(GLFW_KEY_7) || ImGui::IsKeyPressed(GLFW_KEY_KP_7)) s.cc.preset(CameraController::Preset::kTop, s.lo, s.hi);
+      if (ImGui::IsKeyPressed(GLFW_KEY_P)) addPick(s, mx, my);
+      if (ImGui::IsKeyPressed(GLFW_KEY_B)) {
+        Status b = bookmark(s);
+        if (!b) s.status = b.message();
+      }
+      if (ImGui::IsKeyPressed(GLFW_KEY_F12)) {
+        Status b = screenshot(s, s.packPath + ".screenshot.png");
+        if (!b) s.status = b.message();
+      }
+    }
+    // The scene.
+    FrameResult fr;
+    Status rst = s.renderer->render(s.cc.camera(), s.rs, fr, 0u);
+    if (!rst) {
+      std::fprintf(stderr, "scanatlas: error: %s\n", rst.message().c_str());
+      rc = 1;
+      break;
+    }
+    s.stats = fr.stats;
+    s.frameMs.push_back(float(fr.stats.cpuMs));
+    if (s.frameMs.size() > 120) s.frameMs.pop_front();
+    // Script: one command per frame, after the frame it acts on has been drawn.
+    if (waitFrames > 0) {
+      --waitFrames;
+    } else if (scriptLine < script.size()) {
+      Status cs = runCommand(s, win, script[scriptLine++], quit, waitFrames);
+      if (!cs) {
+        std::fprintf(stderr, "scanatlas: error: %s:%zu: %s\n", opt.scriptPath.c_str(), scriptLine, cs.message().c_str());
+        rc = 2;
+        quit = true;
+      }
+    } else if (!script.empty()) {
+      quit = true;  // a script ends the session
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glViewport(0, 0, fbw, fbh);
+    s.renderer->present(fbw, fbh);
+    drawPanel(s, win);
+    ImGui::Render();
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    if (!s.pendingWindowShot.empty()) {
+      Image img;
+      img.width = fbw;
+      img.height = fbh;
+      img.rgba.resize(size_t(fbw) * fbh * 4);
+      std::vector<uint8_t> rows(img.rgba.size());
+      glReadBuffer(GL_BACK);
+      glPixelStorei(GL_PACK_ALIGNMENT, 1);
+      glReadPixels(0, 0, fbw, fbh, GL_RGBA, GL_UNSIGNED_BYTE, rows.data());
+      for (int y = 0; y < fbh; ++y)
+        std::memcpy(&img.rgba[size_t(y) * fbw * 4], &rows[size_t(fbh - 1 - y) * fbw * 4], size_t(fbw) * 4);
+      for (size_t i = 3; i < img.rgba.size(); i += 4) img.rgba[i] = 255;
+      Status ws = writePng(s.pendingWindowShot, img);
+      s.status = ws ? "saved " + s.pendingWindowShot : ws.message();
+      s.pendingWindowShot.clear();
+    }
+    char t[256];
+    std::snprintf(t, sizeof(t), "%s — %.1f ms", title.c_str(), fr.stats.cpuMs);
+    glfwSetWindowTitle(win, t);
+    glfwSwapBuffers(win);
+  }
+  ImGui_ImplOpenGL3_Shutdown();
+  ImGui_ImplGlfw_Shutdown();
+  ImGui::DestroyContext();
+  s.renderer.reset();  // GL objects go while the context is current
+  glfwDestroyWindow(win);
+  glfwTerminate();
+  if (s.measureOut != stdout) std::fclose(s.measureOut);
+  return rc;
+}
+
+}  // namespace sa
