@@ -10,6 +10,6 @@ cmake --build build-asan -j"${JOBS:-2}"
 cd build-asan
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 # Tests that create a GL context (directly or through the scanatlas binary).
-gl='^(RenderTest|Accuracy|Stress|Cli)\.'
+gl='^(RenderTest|Accuracy|Stress|Cli|Window)\.'
 ASAN_OPTIONS=detect_leaks=1 ctest --output-on-failure -j"${JOBS:-2}" -E "$gl"
 ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure -j"${JOBS:-2}" -R "$gl"
