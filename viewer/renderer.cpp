@@ -378,6 +378,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     hHi = std::max(hHi, h);
   }
   const float heightLo = float(hLo), heightHi = float(hHi);
+  const Eigen::Vector3f lightF = s.lightDir.normalized().cast<float>();
   const Eigen::Vector3f clipLo = (s.clip.lo - cam.eye).cast<float>(), clipHi = (s.clip.hi - cam.eye).cast<float>();
   const Eigen::Vector3d pn = s.clip.normal.normalized();
   const Eigen::Vector4f plane(float(pn.x()), float(pn.y()), float(pn.z()), float(-pn.dot(s.clip.point - cam.eye)));
@@ -393,6 +394,8 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     glUniform1i(glGetUniformLocation(p, "useColor"), color ? 1 : 0);
     glUniform3fv(glGetUniformLocation(p, "baseColor"), 1, s.baseColor);
     glUniform1i(glGetUniformLocation(p, "shadingMode"), int(s.shading));
+    glUniform1i(glGetUniformLocation(p, "headLight"), s.headLight ? 1 : 0);
+    glUniform3fv(glGetUniformLocation(p, "lightDir"), 1, lightF.data());
     glUniform3fv(glGetUniformLocation(p, "upAxis"), 1, upF.data());
     glUniform1f(glGetUniformLocation(p, "heightLo"), heightLo);
     glUniform1f(glGetUniformLocation(p, "heightHi"), heightHi);

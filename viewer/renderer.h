@@ -37,6 +37,8 @@ struct RenderSettings {
   float edlStrength = 1.0f;
   float edlRadius = 1.5f;    // pixels
   bool showBoxes = false;    // cell boxes as wireframes coloured by orientation
+  bool headLight = true;     // else a fixed light from lightDir (world, toward the light)
+  Eigen::Vector3d lightDir = Eigen::Vector3d(0.3, 1, 0.5);
   Eigen::Vector3d up = Eigen::Vector3d::UnitY();  // axis of the height colour ramp
   ClipSettings clip;
   int iterations = 12;   // linear search steps (the bound when steps are adaptive)

@@ -23,6 +23,7 @@
 #include "viewer/camera_controller.h"
 #include "viewer/camera_path.h"
 #include "viewer/renderer.h"
+#include "viewer/source_points.h"
 
 namespace sa {
 
@@ -39,7 +40,7 @@ const char* kViewerScriptHelp =
     "  clear                          forget the picks\n"
     "  clip box X0 Y0 Z0 X1 Y1 Z1 | clip plane PX PY PZ NX NY NZ | clip off\n"
     "  shading lambert|normals|height|color | edl on|off | boxes on|off | iterations N\n"
-    "  screenshot FILE.png            the current view at window resolution\n"
+    "  screenshot FILE.png [W H]      the current view, at window resolution or W x H\n"
     "  windowshot FILE.png            the whole window, panel included\n"
     "  bookmark                       append the camera to PACK.views.json\n"
     "  wait N                         render N frames\n"
@@ -134,9 +135,14 @@ void applyClip(AppState& s) {
   s.rs.clip.point[s.sectionAxis] = s.lo[s.sectionAxis] + ext[s.sectionAxis] * s.sectionAt;
 }
 
-Status screenshot(AppState& s, const std::string& path) {
+Status screenshot(AppState& s, const std::string& path, int width = 0, int height = 0) {
   FrameResult fr;
-  SA_RETURN_IF_ERROR(s.renderer->render(s.cc.camera(), s.rs, fr, kReadColor));
+  Camera cam = s.cc.camera();
+  if (width > 0 && height > 0) {
+    cam.width = width;
+    cam.height = height;
+  }
+  SA_RETURN_IF_ERROR(s.renderer->render(cam, s.rs, fr, kReadColor));
   SA_RETURN_IF_ERROR(writePng(path, fr.color));
   s.status = "saved " + path;
   return Status::ok();
@@ -227,6 +233,7 @@ Status runCommand(AppState& s, GLFWwindow* win, const std::string& line, bool& q
     const std::string m = words[0];
     s.rs.useColor = m == "color";
     s.rs.shading = m == "normals" ? Shading::kNormals : m == "height" ? Shading::kHeight : Shading::kLambert;
+    s.shadingChoice = m == "color" ? 3 : int(s.rs.shading);
   } else if (cmd == "edl" && !words.empty()) {
     s.rs.edl = words[0] == "on";
   } else if (cmd == "boxes" && !words.empty()) {
@@ -235,7 +242,8 @@ Status runCommand(AppState& s, GLFWwindow* win, const std::string& line, bool& q
     SA_RETURN_IF_ERROR(need(1));
     s.rs.iterations = std::max(1, int(v[0]));
   } else if (cmd == "screenshot" && !words.empty()) {
-    SA_RETURN_IF_ERROR(screenshot(s, words[0]));
+    SA_RETURN_IF_ERROR(screenshot(s, words[0], v.size() >= 2 ? int(v[0]) : 0, v.size() >= 2 ? int(v[1]) : 0));
+    waitFrames = 1;  // the next frame renders at window size again
   } else if (cmd == "windowshot" && !words.empty()) {
     s.pendingWindowShot = words[0];
   } else if (cmd == "bookmark") {
@@ -260,6 +268,20 @@ void drawPanel(AppState& s, GLFWwindow* win) {
   ImGui::Text("boxes %u drawn, %u culled, %u splats", s.stats.drawn, s.stats.culled, s.stats.splats);
   ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
   if (ImGui::CollapsingHeader("Surface", ImGuiTreeNodeFlags_DefaultOpen)) {
+    int mode = s.rs.mode == RenderMode::kPoints ? 1 : 0;
+    const char* modes[] = {"parallax (height fields)", "points (source splats)"};
+    if (ImGui::Combo("mode", &mode, modes, 2)) {
+      if (mode == 1 && !s.renderer->hasPoints()) {
+        SourcePoints pts;
+        Status ls = loadSourcePoints(s.pack, pts);
+        if (ls) ls = s.renderer->setPoints(pts.xyz, pts.rgba, s.pack.meta().sampleSpacing);
+        if (!ls) {
+          s.status = ls.message();
+          mode = 0;
+        }
+      }
+      s.rs.mode = mode == 1 ? RenderMode::kPoints : RenderMode::kParallax;
+    }
     ImGui::SliderInt("iterations", &s.rs.iterations, 1, 64);
     ImGui::Checkbox("frustum cull", &s.rs.cull.frustum);
     ImGui::SameLine();
@@ -274,6 +296,20 @@ void drawPanel(AppState& s, GLFWwindow* win) {
     if (ImGui::Combo("shading", &s.shadingChoice, modes, 4)) {
       s.rs.useColor = s.shadingChoice == 3;
       s.rs.shading = s.shadingChoice == 1 ? Shading::kNormals : s.shadingChoice == 2 ? Shading::kHeight : Shading::kLambert;
+    }
+    ImGui::Checkbox("head light", &s.rs.headLight);
+    if (!s.rs.headLight) {
+      static float az = 30.f, el = 45.f;
+      bool moved = ImGui::SliderFloat("light azimuth", &az, -180.f, 180.f);
+      moved |= ImGui::SliderFloat("light elevation", &el, -89.f, 89.f);
+      (void)moved;
+      {
+        const Eigen::Vector3d up = s.rs.up.normalized();
+        const Eigen::Vector3d a = (std::abs(up.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitZ()).cross(up).normalized();
+        const Eigen::Vector3d b = up.cross(a);
+        const double ra = az * M_PI / 180, re = el * M_PI / 180;
+        s.rs.lightDir = std::cos(re) * (std::cos(ra) * b + std::sin(ra) * a) + std::sin(re) * up;
+      }
     }
     ImGui::Checkbox("eye-dome lighting", &s.rs.edl);
     if (s.rs.edl) ImGui::SliderFloat("EDL strength", &s.rs.edlStrength, 0.1f, 5.f);
@@ -317,6 +353,19 @@ void drawPanel(AppState& s, GLFWwindow* win) {
     if (ImGui::Button("screenshot (F12)")) {
       Status st = screenshot(s, s.packPath + ".screenshot.png");
       if (!st) s.status = st.message();
+    }
+    const std::string views = s.packPath + ".views.json";
+    if (std::filesystem::exists(views)) {
+      auto cams = readCameraPath(views, s.cc.camera().width, s.cc.camera().height);
+      if (cams) {
+        for (size_t i = 0; i < cams->size(); ++i) {
+          if (i % 6) ImGui::SameLine();
+          if (ImGui::Button(("view " + std::to_string(i + 1)).c_str())) {
+            s.cc.camera() = (*cams)[i];
+            s.pivot = (*cams)[i].target;
+          }
+        }
+      }
     }
     static bool vsync = true;
     if (ImGui::Checkbox("vsync", &vsync)) glfwSwapInterval(vsync ? 1 : 0);
@@ -395,6 +444,8 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   ImGui_ImplGlfw_InitForOpenGL(win, true);
   ImGui_ImplOpenGL3_Init("#version 450");
   int rc = 0;
+  const auto tOpen = std::chrono::steady_clock::now();
+  bool firstFrame = true;
   st = s.renderer->init(s.pack);
   if (!st) {
     std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
@@ -541,6 +592,13 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     std::snprintf(t, sizeof(t), "%s — %.1f ms", title.c_str(), fr.stats.cpuMs);
     glfwSetWindowTitle(win, t);
     glfwSwapBuffers(win);
+    if (firstFrame && !opt.quiet) {
+      std::fprintf(stderr, "view: first frame %.0f ms after opening the pack (%s, %u cells, %.1f MiB on the GPU)\n",
+                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tOpen).count(),
+                   reinterpret_cast<const char*>(glGetString(GL_RENDERER)), s.pack.meta().cellCount,
+                   s.renderer->gpuBytes() / 1048576.0);
+    }
+    firstFrame = false;
   }
   ImGui_ImplOpenGL3_Shutdown();
   ImGui_ImplGlfw_Shutdown();

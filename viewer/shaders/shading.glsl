@@ -3,9 +3,15 @@ uniform int shadingMode;   // 0 Lambert with head light, 1 normals, 2 height col
 uniform vec3 upAxis;       // world up, for the height ramp
 uniform float heightLo;    // ramp range, heights along upAxis relative to the camera
 uniform float heightHi;
+uniform bool headLight;    // true: the light sits at the eye; false: lightDir
+uniform vec3 lightDir;     // direction toward the light (world), when not a head light
 
 vec3 shadeLambert(vec3 albedo, vec3 normal, vec3 toEye) {
-  float ndl = abs(dot(normalize(normal), normalize(toEye)));
+  // Height-field normals face the cell's W side; turn them toward the viewer so the light
+  // test is two-sided like the head light's.
+  vec3 n = normalize(normal);
+  if (dot(n, toEye) < 0.0) n = -n;
+  float ndl = headLight ? abs(dot(n, normalize(toEye))) : max(dot(n, normalize(lightDir)), 0.0);
   return albedo * (0.12 + 0.88 * ndl);
 }
 
