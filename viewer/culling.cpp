@@ -14,6 +14,7 @@ CellCuller::CellCuller(std::span<const CellRecord> cells) {
     b.v = Eigen::Vector3d(c.v);
     b.w = Eigen::Vector3d(c.w);
     std::copy(c.box, c.box + 6, b.box);
+    b.page = c.page;
     const double cu = (c.box[0] + c.box[1]) / 2, cv = (c.box[2] + c.box[3]) / 2, cw = (c.box[4] + c.box[5]) / 2;
     b.center = b.origin + b.u * cu + b.v * cv + b.w * cw;
     b.radius = 0.5 * std::sqrt(std::pow(c.box[1] - c.box[0], 2) + std::pow(c.box[3] - c.box[2], 2) +
@@ -36,6 +37,10 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
   std::vector<double> depthOf(opt.frontToBack ? bounds_.size() : 0);
   for (uint32_t i = 0; i < bounds_.size(); ++i) {
     const Bounds& b = bounds_[i];
+    if (opt.pageResident && !opt.pageResident[b.page]) {
+      ++out.culled;
+      continue;
+    }
     if (opt.clipBox) {
       const Eigen::Vector3d nearest = b.center.cwiseMax(opt.clipLo).cwiseMin(opt.clipHi);
       if ((nearest - b.center).norm() > b.radius) {

@@ -28,6 +28,9 @@ struct CullOptions {
   Eigen::Vector3d clipLo = Eigen::Vector3d::Zero(), clipHi = Eigen::Vector3d::Zero();
   bool clipPlane = false;
   Eigen::Vector3d planePoint = Eigen::Vector3d::Zero(), planeNormal = Eigen::Vector3d::UnitZ();
+  // Pages still streaming to the GPU: cells on a page with pageResident[page] == 0 are
+  // skipped this frame (null: every page is resident).
+  const uint8_t* pageResident = nullptr;
 };
 
 struct DrawItem {
@@ -55,6 +58,7 @@ class CellCuller {
     Eigen::Vector3d center, origin, u, v, w;
     double radius;
     double box[6];
+    uint32_t page;
   };
   std::vector<Bounds> bounds_;
 };

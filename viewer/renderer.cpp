@@ -112,6 +112,9 @@ struct Renderer::Gl {
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0;
+  const PackReader* pack = nullptr;   // for streamed pages
+  std::vector<uint8_t> resident;      // per page
+  uint32_t nextPage = 0;
   void releaseTargets() {
     GLuint fbos[] = {fbo, postFbo};
     glDeleteFramebuffers(2, fbos);
@@ -148,7 +151,9 @@ Renderer::~Renderer() = default;
 
 double Renderer::nearPlane() const { return std::max((boundsMax_ - boundsMin_).norm() / 2, 1e-12) * 1e-5; }
 
-Status Renderer::init(const PackReader& pack) {
+bool Renderer::pagesPending() const { return gl_ && gl_->nextPage < gl_->resident.size(); }
+
+Status Renderer::init(const PackReader& pack, bool streamPages) {
   gl_ = std::make_unique<Gl>();
   Gl& g = *gl_;
   const PackMeta& m = pack.meta();
@@ -210,18 +215,15 @@ Status Renderer::init(const PackReader& pack) {
                             " layers of " + std::to_string(maxSize) + "^2");
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.heightTex);
   glTextureStorage3D(g.heightTex, 1, GL_R16UI, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
-  for (uint32_t p = 0; p < m.pageCount; ++p)
-    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1,
-                        GL_RED_INTEGER, GL_UNSIGNED_SHORT, pack.heightPage(p));
+  g.pack = &pack;
+  g.resident.assign(m.pageCount, 0);
+  g.nextPage = 0;
   glTextureParameteri(g.heightTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
   glTextureParameteri(g.heightTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 2;
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.pageColorTex);
   if (hasColor_) {
     glTextureStorage3D(g.pageColorTex, 1, GL_RGBA8, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
-    for (uint32_t p = 0; p < m.pageCount; ++p)
-      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
-                          GL_UNSIGNED_BYTE, pack.colorPage(p));
     gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 4;
   } else {
     const uint8_t white[4] = {255, 255, 255, 255};
@@ -231,7 +233,32 @@ Status Renderer::init(const PackReader& pack) {
   glTextureParameteri(g.pageColorTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
   glTextureParameteri(g.pageColorTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
+  if (!streamPages) {
+    uploadPages(UINT64_MAX);
+    g.pack = nullptr;
+    if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
+  }
   return Status::ok();
+}
+
+void Renderer::uploadPages(uint64_t budgetBytes) {
+  Gl& g = *gl_;
+  if (!g.pack) return;
+  const PackMeta& m = g.pack->meta();
+  const uint64_t pageBytes = uint64_t(m.pageSize) * m.pageSize * (hasColor_ ? 6 : 2);
+  uint64_t spent = 0;
+  // At least one page per call, then as many as the budget allows.
+  while (g.nextPage < m.pageCount && (spent == 0 || spent + pageBytes <= budgetBytes)) {
+    const uint32_t p = g.nextPage++;
+    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RED_INTEGER,
+                        GL_UNSIGNED_SHORT, g.pack->heightPage(p));
+    if (hasColor_)
+      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
+                          GL_UNSIGNED_BYTE, g.pack->colorPage(p));
+    g.resident[p] = 1;
+    spent += pageBytes;
+  }
+  if (g.nextPage >= m.pageCount) g.pack = nullptr;
 }
 
 Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing) {
@@ -304,6 +331,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   glNamedFramebufferDrawBuffers(g.fbo, 3, bufs);
 
   const auto t0 = std::chrono::steady_clock::now();
+  uploadPages(uint64_t(64) << 20);  // streamed packs: 64 MiB of pages per frame
   // Camera relative to the pack origin, in double, then split for the GPU.
   const Eigen::Vector3d camRel = cam.eye - origin_;
   float hi[3], lo[3];
@@ -325,6 +353,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     co.planePoint = s.clip.point - origin_;
     co.planeNormal = s.clip.normal.normalized();
     co.maxSteps = std::max(1, s.iterations);
+    co.pageResident = pagesPending() ? g.resident.data() : nullptr;
     co.minSteps = std::min(co.minSteps, co.maxSteps);
     culler_->compute(cam, camRel, np, co, vis);
     st.submitted = vis.submitted;

@@ -73,8 +73,11 @@ class Renderer {
  public:
   Renderer();
   ~Renderer();
-  // Uploads the pack (the reader is needed only during init()).
-  Status init(const PackReader& pack);
+  // Uploads the pack. streamPages: allocate the atlas but upload its pages a few per frame
+  // (a window shows its first image at once, whatever the pack's size; cells on pages not yet
+  // resident are skipped); the reader must then outlive the renderer.
+  Status init(const PackReader& pack, bool streamPages = false);
+  bool pagesPending() const;
   // The points baseline: positions relative to the pack origin (xyz floats), RGBA8 colours.
   Status setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing);
   bool hasPoints() const { return pointCount_ > 0; }
@@ -91,6 +94,7 @@ class Renderer {
   double nearPlane() const;
 
  private:
+  void uploadPages(uint64_t budgetBytes);
   struct Gl;
   std::unique_ptr<Gl> gl_;
   std::unique_ptr<CellCuller> culler_;

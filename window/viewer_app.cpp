@@ -446,7 +446,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   int rc = 0;
   const auto tOpen = std::chrono::steady_clock::now();
   bool firstFrame = true;
-  st = s.renderer->init(s.pack);
+  st = s.renderer->init(s.pack, /*streamPages=*/true);
   if (!st) {
     std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
     rc = 1;
@@ -589,7 +589,8 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
       s.pendingWindowShot.clear();
     }
     char t[256];
-    std::snprintf(t, sizeof(t), "%s — %.1f ms", title.c_str(), fr.stats.cpuMs);
+    std::snprintf(t, sizeof(t), "%s — %.1f ms%s", title.c_str(), fr.stats.cpuMs,
+                  s.renderer->pagesPending() ? " (loading pages)" : "");
     glfwSetWindowTitle(win, t);
     glfwSwapBuffers(win);
     if (firstFrame && !opt.quiet) {
