@@ -8,6 +8,7 @@
 #include <imgui_impl_glfw.h>
 #include <imgui_impl_opengl3.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -600,6 +601,11 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
                    s.renderer->gpuBytes() / 1048576.0);
     }
     firstFrame = false;
+  }
+  if (!opt.quiet && !s.frameMs.empty()) {
+    std::vector<float> ft(s.frameMs.begin(), s.frameMs.end());
+    std::sort(ft.begin(), ft.end());
+    std::fprintf(stderr, "view: median frame %.1f ms over the last %zu frames (%dx%d)\n", ft[ft.size() / 2], ft.size(), fbw, fbh);
   }
   ImGui_ImplOpenGL3_Shutdown();
   ImGui_ImplGlfw_Shutdown();
