@@ -99,17 +99,9 @@ int cmdBench(int argc, char** argv) {
   if (!warmup) return reportError(warmup.status());
   if (!frames) return reportError(frames.status());
   std::vector<RenderMode> modes;
-  for (const auto& m : splitList(a.get("mode", "parallax"))) {
-    auto r = parseMode(m);
-    if (!r) return reportError(r.status());
-    modes.push_back(*r);
-  }
   std::vector<int> iters;
-  for (const auto& t : splitList(a.get("iterations", "12"))) {
-    auto r = parseInt("iterations", t, 1, 1024);
-    if (!r) return reportError(r.status());
-    iters.push_back(int(*r));
-  }
+  s = modesAndIterations(a, modes, iters);
+  if (!s) return reportError(s);
   RenderSettings base;
   base.useColor = !a.flag("no-color");
   base.cull.frustum = !a.flag("no-frustum-cull");

@@ -81,17 +81,9 @@ int cmdEval(int argc, char** argv) {
   auto repeat = parseInt("repeat", a.get("repeat", "3"), 1, 1000);
   if (!repeat) return reportError(repeat.status());
   std::vector<RenderMode> modes;
-  for (const auto& m : splitList(a.get("mode", "parallax"))) {
-    auto r = parseMode(m);
-    if (!r) return reportError(r.status());
-    modes.push_back(*r);
-  }
   std::vector<int> iters;
-  for (const auto& t : splitList(a.get("iterations", "12"))) {
-    auto r = parseInt("iterations", t, 1, 1024);
-    if (!r) return reportError(r.status());
-    iters.push_back(int(*r));
-  }
+  s = modesAndIterations(a, modes, iters);
+  if (!s) return reportError(s);
   if (a.has("plot")) {
     // Check the plotting dependency before the long part.
     if (std::system("/usr/bin/python3 -c 'import matplotlib' >/dev/null 2>&1") != 0)

@@ -102,28 +102,17 @@ int cmdRender(int argc, char** argv) {
   rs.up = cams[0].up;
   rs.edl = a.flag("edl");
   rs.showBoxes = a.flag("boxes");
+  std::vector<double> n;
   if (a.has("clip-box")) {
-    const auto v = splitList(a.get("clip-box"));
-    if (v.size() != 6) return reportError(Status::badInput("--clip-box: expected x0,y0,z0,x1,y1,z1"));
-    double n[6];
-    for (int i = 0; i < 6; ++i) {
-      auto x = parseNumber("clip-box", v[size_t(i)]);
-      if (!x) return reportError(x.status());
-      n[i] = *x;
-    }
+    s = numberList(a, "clip-box", 6, n);
+    if (!s) return reportError(s);
     rs.clip.box = true;
     rs.clip.lo = Eigen::Vector3d(std::min(n[0], n[3]), std::min(n[1], n[4]), std::min(n[2], n[5]));
     rs.clip.hi = Eigen::Vector3d(std::max(n[0], n[3]), std::max(n[1], n[4]), std::max(n[2], n[5]));
   }
   if (a.has("section")) {
-    const auto v = splitList(a.get("section"));
-    if (v.size() != 6) return reportError(Status::badInput("--section: expected px,py,pz,nx,ny,nz"));
-    double n[6];
-    for (int i = 0; i < 6; ++i) {
-      auto x = parseNumber("section", v[size_t(i)]);
-      if (!x) return reportError(x.status());
-      n[i] = *x;
-    }
+    s = numberList(a, "section", 6, n);
+    if (!s) return reportError(s);
     rs.clip.plane = true;
     rs.clip.point = Eigen::Vector3d(n[0], n[1], n[2]);
     rs.clip.normal = Eigen::Vector3d(n[3], n[4], n[5]);

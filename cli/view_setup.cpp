@@ -15,6 +15,34 @@ std::vector<std::string> splitList(const std::string& s) {
   return out;
 }
 
+Status modesAndIterations(const Args& a, std::vector<RenderMode>& modes, std::vector<int>& iterations) {
+  for (const auto& m : splitList(a.get("mode", "parallax"))) {
+    auto r = parseMode(m);
+    if (!r) return r.status();
+    modes.push_back(*r);
+  }
+  for (const auto& t : splitList(a.get("iterations", "12"))) {
+    auto r = parseInt("iterations", t, 1, 1024);
+    if (!r) return r.status();
+    iterations.push_back(int(*r));
+  }
+  if (modes.empty() || iterations.empty()) return Status::badInput("--mode and --iterations need at least one value");
+  return Status::ok();
+}
+
+Status numberList(const Args& a, const std::string& opt, size_t count, std::vector<double>& out) {
+  const auto items = splitList(a.get(opt));
+  if (items.size() != count)
+    return Status::badInput("--" + opt + ": expected " + std::to_string(count) + " comma-separated numbers");
+  out.clear();
+  for (const auto& i : items) {
+    auto x = parseNumber(opt, i);
+    if (!x) return x.status();
+    out.push_back(*x);
+  }
+  return Status::ok();
+}
+
 void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi) {
   const PackMeta& m = pack.meta();
   const Eigen::Vector3d origin(m.origin[0], m.origin[1], m.origin[2]);

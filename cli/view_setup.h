@@ -7,6 +7,7 @@
 #include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "viewer/camera.h"
+#include "viewer/renderer.h"
 
 namespace sa {
 
@@ -14,6 +15,10 @@ namespace sa {
 Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, int defaultSize,
                        std::vector<Camera>& out);
 std::vector<std::string> splitList(const std::string& s);
+// --mode LIST (default parallax) and --iterations LIST (default 12), as bench and eval take them.
+Status modesAndIterations(const Args& a, std::vector<RenderMode>& modes, std::vector<int>& iterations);
+// --opt with exactly `count` comma-separated numbers.
+Status numberList(const Args& a, const std::string& opt, size_t count, std::vector<double>& out);
 void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi);
 
 }  // namespace sa

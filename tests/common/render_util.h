@@ -1,5 +1,7 @@
 // GPU-vs-CPU comparison helpers for the viewer and stress tests.
 #pragma once
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <string>
 #include <vector>
@@ -8,8 +10,24 @@
 #include "preprocess/pipeline.h"
 #include "test_util.h"
 #include "viewer/camera.h"
+#include "viewer/egl_context.h"
 
 namespace sa::test {
+
+// A fixture with one headless GL context for the whole test suite.
+class GlTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    ctx_ = new EglContext;
+    Status s = ctx_->init();
+    ASSERT_TRUE(s.isOk()) << s.message();
+  }
+  static void TearDownTestSuite() {
+    delete ctx_;
+    ctx_ = nullptr;
+  }
+  static inline EglContext* ctx_ = nullptr;
+};
 
 // Linear depth of the CPU reference ray cast for every pixel (+inf on a miss).
 inline std::vector<float> cpuDepth(const PackReader& p, const Camera& cam) {

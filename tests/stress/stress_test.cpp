@@ -16,15 +16,8 @@
 namespace sa {
 namespace {
 
-class Stress : public ::testing::Test {
+class Stress : public test::GlTest {
  protected:
-  static void SetUpTestSuite() {
-    ctx_ = new EglContext;
-    Status s = ctx_->init();
-    ASSERT_TRUE(s.isOk()) << s.message();
-  }
-  static void TearDownTestSuite() { delete ctx_; }
-  static EglContext* ctx_;
 
   // Renders `cam` on the GPU and on the CPU; returns the agreement within tol.
   test::Agreement compare(const std::string& packPath, const Camera& cam, double tol, const char* label,
@@ -57,7 +50,6 @@ class Stress : public ::testing::Test {
 
   test::TempDir dir_;
 };
-EglContext* Stress::ctx_ = nullptr;
 
 double fraction(const test::Agreement& a) { return a.covered ? double(a.agree) / double(a.covered) : 0; }
 

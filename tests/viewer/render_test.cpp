@@ -15,15 +15,8 @@
 namespace sa {
 namespace {
 
-class RenderTest : public ::testing::Test {
+class RenderTest : public test::GlTest {
  protected:
-  static void SetUpTestSuite() {
-    ctx_ = new EglContext;
-    Status s = ctx_->init();
-    ASSERT_TRUE(s.isOk()) << s.message();
-  }
-  static void TearDownTestSuite() { delete ctx_; }
-  static EglContext* ctx_;
 
   std::string pack(const std::vector<Eigen::Vector3d>& pts, const std::vector<Eigen::Vector3d>& nrm,
                    const std::string& name, PackOptions opt = {}) {
@@ -33,7 +26,6 @@ class RenderTest : public ::testing::Test {
 
   test::TempDir dir_;
 };
-EglContext* RenderTest::ctx_ = nullptr;
 
 using test::Agreement;
 using test::agreement;
