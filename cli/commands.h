@@ -11,6 +11,7 @@ int cmdInfo(int argc, char** argv);
 int cmdBench(int argc, char** argv);
 int cmdEval(int argc, char** argv);
 int cmdView(int argc, char** argv);
+int cmdVerify(int argc, char** argv);
 int reportError(const Status& s);
 std::string jsonEscape(const std::string& s);
 }  // namespace sa

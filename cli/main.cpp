@@ -18,6 +18,7 @@ const char* kUsage =
     "  view    the interactive window (a scan is packed into a cache beside it first)\n"
     "  render  render views of a pack headless to PNG (and depth to PFM)\n"
     "  info    describe a pack: cells, levels, texels, bytes, bounds, timings\n"
+    "  verify  check a pack completely: checksums, tile layout, gutters, frames, counts\n"
     "  bench   frame times over a camera path, per mode and setting (GPU and CPU time, boxes, fragments)\n"
     "  eval    image error against a reference mesh or scan set, with frame times; trade-off plot\n"
     "\n"
@@ -29,6 +30,10 @@ namespace sa {
 
 int reportError(const Status& s) {
   std::fprintf(stderr, "scanatlas: error: %s\n", s.message().c_str());
+  // Damaged packs: point at the full check.
+  if (s.message().find(".hfa: ") != std::string::npos &&
+      (s.message().find("corrupt") != std::string::npos || s.message().find("truncated") != std::string::npos))
+    std::fprintf(stderr, "scanatlas: run 'scanatlas verify' on the pack for a full report\n");
   return s.kind() == ErrorKind::kBadInput ? 2 : 1;
 }
 
@@ -69,6 +74,7 @@ int main(int argc, char** argv) {
   if (cmd == "render") return sa::cmdRender(argc - 2, argv + 2);
   if (cmd == "view") return sa::cmdView(argc - 2, argv + 2);
   if (cmd == "info") return sa::cmdInfo(argc - 2, argv + 2);
+  if (cmd == "verify") return sa::cmdVerify(argc - 2, argv + 2);
   if (cmd == "bench") return sa::cmdBench(argc - 2, argv + 2);
   if (cmd == "eval") return sa::cmdEval(argc - 2, argv + 2);
   std::fprintf(stderr, "scanatlas: unknown command '%s'\n\n%s", cmd.c_str(), kUsage);

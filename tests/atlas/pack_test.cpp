@@ -182,3 +182,49 @@ TEST(PackFile, ReaderRejectsCorruptTruncatedAndNewerFiles) {
 
 }  // namespace
 }  // namespace sa
+
+#include "atlas/verify.h"
+
+namespace sa {
+namespace {
+
+TEST(Verify, SoundPackPassesAndDamageIsReported) {
+  test::TempDir d;
+  SmallPack sp = makePack(false);
+  for (auto& c : sp.cells) c.pointCount = 1;
+  sp.meta.sourcePoints = sp.cells.size();
+  {
+    PackWriter w;
+    ASSERT_TRUE(w.open(d.file("ok.hfa"), sp.meta, sp.cells, "").isOk());
+    for (uint32_t i = 0; i < sp.cells.size(); ++i) ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), nullptr).isOk());
+    ASSERT_TRUE(w.finish().isOk());
+  }
+  PackReader ok;
+  ASSERT_TRUE(ok.open(d.file("ok.hfa")).isOk());
+  VerifyReport r = verifyPack(ok);
+  EXPECT_TRUE(r.problems.empty()) << r.problems[0];
+  EXPECT_EQ(r.cellsChecked, sp.cells.size());
+  // Two tiles at the same place, a skewed frame and a wrong point count: all reported.
+  SmallPack bad = sp;
+  bad.cells[1].page = bad.cells[0].page;
+  bad.cells[1].tileX = bad.cells[0].tileX;
+  bad.cells[1].tileY = bad.cells[0].tileY;
+  bad.cells[2].u[1] = 0.5;
+  bad.meta.sourcePoints += 3;
+  {
+    PackWriter w;
+    ASSERT_TRUE(w.open(d.file("bad.hfa"), bad.meta, bad.cells, "").isOk());
+    ASSERT_TRUE(w.finish().isOk());
+  }
+  PackReader br;
+  ASSERT_TRUE(br.open(d.file("bad.hfa")).isOk());
+  r = verifyPack(br);
+  std::string all;
+  for (const auto& p : r.problems) all += p + "\n";
+  EXPECT_NE(all.find("overlaps"), std::string::npos) << all;
+  EXPECT_NE(all.find("not orthonormal"), std::string::npos) << all;
+  EXPECT_NE(all.find("META counts"), std::string::npos) << all;
+}
+
+}  // namespace
+}  // namespace sa
