@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include "formats/conf.h"
+#include "formats/las.h"
 #include "formats/ply.h"
 
 namespace sa {
@@ -25,6 +26,21 @@ Status addPly(const std::string& path, std::vector<InputFile>& out, std::vector<
   f.hasColors = h->hasColors;
   f.hasFaces = h->hasFaces;
   for (auto& w : h->warnings) warnings.push_back(w);
+  out.push_back(f);
+  return Status::ok();
+}
+
+Status addLas(const std::string& path, std::vector<InputFile>& out, bool& terrainLike) {
+  Result<LasHeader> h = readLasHeader(path);
+  if (!h) return h.status();
+  const double dz = h->max[2] - h->min[2];
+  const double dxy = std::max(h->max[0] - h->min[0], h->max[1] - h->min[1]);
+  terrainLike = dxy > 0 && dz < 0.2 * dxy;
+  InputFile f;
+  f.path = path;
+  f.format = InputFormat::kLas;
+  f.points = h->pointCount;
+  f.hasColors = h->hasColor;
   out.push_back(f);
   return Status::ok();
 }
@@ -91,9 +107,19 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths) {
       }
     } else if (ext == ".ply") {
       SA_RETURN_IF_ERROR(addPly(path, set.files_, set.warnings_));
+    } else if (ext == ".las" || ext == ".laz") {
+      bool terrainLike = false;
+      SA_RETURN_IF_ERROR(addLas(path, set.files_, terrainLike));
+      // LAS is georeferenced with z up. Airborne data (flat and wide: height range under a
+      // fifth of the horizontal extent) is seen from above: estimated normals face +z.
+      // Terrestrial scans keep the default (away from the centroid).
+      if (terrainLike) {
+        set.files_.back().scanIndex = static_cast<int>(set.towardScanner_.size());
+        set.towardScanner_.push_back(Eigen::Vector3d::UnitZ());
+      }
     } else {
       return Status::badInput(path + ": unsupported input format '" + ext +
-                              "' (supported: .ply, .conf scan sets)");
+                              "' (supported: .ply, .conf scan sets, .las)");
     }
   }
   if (set.files_.size() > 1) {
@@ -136,10 +162,14 @@ Status InputSet::stream(BatchSink& sink, bool readTriangles, size_t batchPoints)
   uint64_t base = 0;
   for (const auto& f : files_) {
     FileAdapter adapter(sink, f, keepNormals, wantColors, base);
-    PlyReadOptions opt;
-    opt.batchPoints = batchPoints;
-    opt.readFaces = readTriangles && hasTriangles();
-    SA_RETURN_IF_ERROR(readPly(f.path, opt, adapter));
+    if (f.format == InputFormat::kLas) {
+      SA_RETURN_IF_ERROR(readLas(f.path, batchPoints, adapter));
+    } else {
+      PlyReadOptions opt;
+      opt.batchPoints = batchPoints;
+      opt.readFaces = readTriangles && hasTriangles();
+      SA_RETURN_IF_ERROR(readPly(f.path, opt, adapter));
+    }
     base += f.points;
   }
   return Status::ok();

@@ -10,8 +10,11 @@
 
 namespace sa {
 
+enum class InputFormat { kPly, kLas };
+
 struct InputFile {
   std::string path;
+  InputFormat format = InputFormat::kPly;
   uint64_t points = 0;
   bool hasNormals = false, hasColors = false, hasFaces = false;
   bool transformed = false;     // member of a scan set

@@ -70,12 +70,16 @@ Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
   XXH3_state_t* st = XXH3_createState();
   XXH3_64bits_reset(st);
   char opts[512];
-  const int n = std::snprintf(opts, sizeof(opts), "v1 %llu %llu %.17g %.17g %.17g %d %d %.17g %u %.17g %d %u",
-                              (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
+  // kPipelineRevision changes whenever packing changes what it writes for the same input, so
+  // packs made by an older build are not mistaken for up to date.
+  constexpr int kPipelineRevision = 2;
+  const int n = std::snprintf(opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %d %d %.17g %u %.17g %d %u",
+                              kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
                               o.texelPerSpacing, o.coverageRadius, int(o.asPoints), o.octree.maxDepth,
                               o.octree.maxAngleDeg, o.octree.minSplitPoints, o.octree.outlierFraction,
                               o.normalNeighbours, o.maxPageSize);
   XXH3_64bits_update(st, opts, size_t(n));
+  for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);
   for (const InputFile& f : input.files()) {
     BufferedReader in;

@@ -235,3 +235,30 @@ TEST(Pipeline, RepackingTheSameInputWithTheSameOptionsIsSkipped) {
 
 }  // namespace
 }  // namespace sa
+
+#include "atlas/verify.h"
+
+namespace sa {
+namespace {
+
+// Airborne lidar in US survey feet at (6.4e5, 8.5e5): packs as terrain seen from above, with
+// its colours, into a pack that verifies.
+TEST(PipelineReal, AutzenLasPacksAsTerrainWithColour) {
+  auto in = InputSet::open({test::sharedData("lidar/autzen_trim.las")});
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  test::TempDir d;
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, d.file("a.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_EQ(sum.pointsRead, 110000u);
+  EXPECT_TRUE(sum.hasColor);
+  EXPECT_EQ(sum.forcedCells, 0u);
+  PackReader r;
+  ASSERT_TRUE(r.open(d.file("a.hfa")).isOk());
+  const VerifyReport v = verifyPack(r);
+  EXPECT_TRUE(v.problems.empty()) << v.problems.front();
+  for (const CellRecord& c : r.cells()) EXPECT_GT(c.w[2], 0.9);  // height axes point up
+  EXPECT_NEAR(r.meta().origin[0] + r.meta().boundsMin[0], 636001.76, 1e-6);
+}
+
+}  // namespace
+}  // namespace sa
