@@ -16,7 +16,8 @@ const char* kHelp =
     "usage: scanatlas pack INPUT... -o OUT.hfa [options]\n"
     "\n"
     "Converts scans into a height-field atlas pack. Inputs: PLY files (ascii or binary, points\n"
-    "or meshes) and Stanford .conf scan sets (range scans aligned by their transforms). Memory\n"
+    "or meshes), Stanford .conf scan sets (range scans aligned by their transforms), LAS 1.0-1.4\n"
+    "(LAZ must be decompressed first) and text clouds (.xyz, .pts, .csv, .txt). Memory\n"
     "stays within --mem-budget whatever the input size (points go through on-disk chunks).\n"
     "\n"
     "options:\n"
@@ -34,6 +35,9 @@ const char* kHelp =
     "                         0.01: estimated normals are noisy; 0 is the paper's strict test)\n"
     "  --min-split N          cells with fewer points are not split further (default 32)\n"
     "  --neighbours K         neighbours for normal estimation when the input has none (default 24)\n"
+    "  --columns LIST         text inputs: what each column is (x,y,z,nx,ny,nz,r,g,b,i; _ skips);\n"
+    "                         default: the header line, or by count (3 xyz, 4 xyzi, 6 xyzrgb,\n"
+    "                         7 xyzirgb as PTS, 9 xyzrgb+normals); delimiter detected\n"
     "  --as-points            ignore mesh faces: build height maps from the vertices by pull-push\n"
     "  --strict               a NaN or infinite coordinate is an error (default: skipped, counted)\n"
     "  --force                repack even if OUT already holds a pack of the same input and options\n"
@@ -85,7 +89,7 @@ int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
-                      "neighbours", "scratch", "outliers", "min-split"},
+                      "neighbours", "scratch", "outliers", "min-split", "columns"},
                      {"as-points", "strict", "force", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
@@ -154,7 +158,7 @@ int cmdPack(int argc, char** argv) {
   const std::string out = a.get("output");
   if (std::filesystem::is_directory(out)) return reportError(Status::badInput(out + ": is a directory; give a file name"));
 
-  auto input = InputSet::open(a.positionals());
+  auto input = InputSet::open(a.positionals(), a.get("columns"));
   if (!input) return reportError(input.status());
   const bool quiet = a.flag("quiet");
   for (const auto& w : input->warnings())

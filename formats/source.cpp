@@ -5,6 +5,7 @@
 
 #include "formats/conf.h"
 #include "formats/las.h"
+#include "formats/text.h"
 #include "formats/ply.h"
 
 namespace sa {
@@ -84,7 +85,7 @@ class FileAdapter : public BatchSink {
 
 }  // namespace
 
-Result<InputSet> InputSet::open(const std::vector<std::string>& paths) {
+Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std::string& textColumns) {
   InputSet set;
   if (paths.empty()) return Status::badInput("no input files given");
   for (const auto& path : paths) {
@@ -117,9 +118,20 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths) {
         set.files_.back().scanIndex = static_cast<int>(set.towardScanner_.size());
         set.towardScanner_.push_back(Eigen::Vector3d::UnitZ());
       }
+    } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
+      auto layout = readTextLayout(path, textColumns);
+      if (!layout) return layout.status();
+      InputFile f;
+      f.path = path;
+      f.format = InputFormat::kText;
+      f.points = layout->dataLines;
+      f.hasNormals = layout->hasNormals;
+      f.hasColors = layout->hasColors;
+      f.columns = textColumns;
+      set.files_.push_back(f);
     } else {
       return Status::badInput(path + ": unsupported input format '" + ext +
-                              "' (supported: .ply, .conf scan sets, .las)");
+                              "' (supported: .ply, .conf scan sets, .las, .xyz/.pts/.csv/.txt)");
     }
   }
   if (set.files_.size() > 1) {
@@ -164,6 +176,10 @@ Status InputSet::stream(BatchSink& sink, bool readTriangles, size_t batchPoints)
     FileAdapter adapter(sink, f, keepNormals, wantColors, base);
     if (f.format == InputFormat::kLas) {
       SA_RETURN_IF_ERROR(readLas(f.path, batchPoints, adapter));
+    } else if (f.format == InputFormat::kText) {
+      auto layout = readTextLayout(f.path, f.columns);
+      if (!layout) return layout.status();
+      SA_RETURN_IF_ERROR(readText(f.path, *layout, batchPoints, adapter));
     } else {
       PlyReadOptions opt;
       opt.batchPoints = batchPoints;

@@ -10,7 +10,7 @@
 
 namespace sa {
 
-enum class InputFormat { kPly, kLas };
+enum class InputFormat { kPly, kLas, kText };
 
 struct InputFile {
   std::string path;
@@ -18,6 +18,7 @@ struct InputFile {
   uint64_t points = 0;
   bool hasNormals = false, hasColors = false, hasFaces = false;
   bool transformed = false;     // member of a scan set
+  std::string columns;          // text inputs: the --columns spec (may be empty)
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
   int scanIndex = -1;           // index into InputSet::towardScanner, or -1
@@ -25,7 +26,8 @@ struct InputFile {
 
 class InputSet {
  public:
-  static Result<InputSet> open(const std::vector<std::string>& paths);
+  // textColumns: the --columns spec for XYZ/PTS/CSV inputs (empty: header or column count).
+  static Result<InputSet> open(const std::vector<std::string>& paths, const std::string& textColumns = "");
 
   const std::vector<InputFile>& files() const { return files_; }
   uint64_t pointCount() const;

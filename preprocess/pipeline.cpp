@@ -350,6 +350,11 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   // NOTE (FORMAT.md): one "source: <path>" line per input, then the command line.
   std::string note;
   for (const auto& f : input.sourcePaths()) note += "source: " + f + "\n";
+  for (const auto& f : input.files())
+    if (!f.columns.empty()) {
+      note += "columns: " + f.columns + "\n";
+      break;
+    }
   note += "command: " + opt.commandLine + "\n";
   PackWriter writer;
   SA_RETURN_IF_ERROR(writer.open(outPath, meta, records, note));

@@ -49,7 +49,14 @@ Status loadSourcePoints(const PackReader& pack, SourcePoints& out) {
   for (const auto& s : sources)
     if (!std::filesystem::exists(s))
       return Status::badInput(pack.path() + ": source file " + s + " is gone; the points baseline reads the sources");
-  auto input = InputSet::open(sources);
+  std::string columns;
+  {
+    std::istringstream in(pack.note());
+    std::string line;
+    while (std::getline(in, line))
+      if (line.rfind("columns: ", 0) == 0) columns = line.substr(9);
+  }
+  auto input = InputSet::open(sources, columns);
   if (!input) return input.status();
   out.xyz.clear();
   out.rgba.clear();

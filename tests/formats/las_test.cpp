@@ -108,3 +108,78 @@ TEST(Las, TruncatedAndHugeCountsAreRejectedBeforeReading) {
 
 }  // namespace
 }  // namespace sa
+
+#include "formats/source.h"
+#include "formats/text.h"
+#include "preprocess/pipeline.h"
+
+namespace sa {
+namespace {
+
+TEST(Text, DelimitersHeadersPtsCountsAndErrors) {
+  test::TempDir d;
+  test::writeText(d.file("a.csv"), "X;Y;Z;Intensity\n1;2;3;7\n4;5;6;8\n");
+  auto L = readTextLayout(d.file("a.csv"), "");
+  ASSERT_TRUE(L.isOk()) << L.status().message();
+  EXPECT_EQ(L->delimiter, ';');
+  EXPECT_EQ(L->dataLines, 2u);
+  test::writeText(d.file("b.pts"), "2\n1 2 3 9 10 20 30\n4 5 6 9 40 50 60\n");
+  L = readTextLayout(d.file("b.pts"), "");
+  ASSERT_TRUE(L.isOk());
+  EXPECT_TRUE(L->hasColors);
+  EXPECT_EQ(L->dataLines, 2u);
+  test::writeText(d.file("c.xyz"), "1 2 3 4 5\n");
+  EXPECT_FALSE(readTextLayout(d.file("c.xyz"), "").isOk());  // 5 columns: ambiguous
+  L = readTextLayout(d.file("c.xyz"), "_,x,y,z,_");
+  ASSERT_TRUE(L.isOk());
+  test::writeText(d.file("e.xyz"), "1 2 3\n4 5 six\n");
+  L = readTextLayout(d.file("e.xyz"), "");
+  ASSERT_TRUE(L.isOk());
+  struct Null : BatchSink {
+    Status onPoints(const PointBatch&) override { return Status::ok(); }
+  } sink;
+  Status s = readText(d.file("e.xyz"), *L, 1024, sink);
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("e.xyz:2: column 3"), std::string::npos) << s.message();
+}
+
+// The same cloud in PLY, XYZ, CSV (with a header) and PTS packs to the same cells.
+TEST(Text, SameCloudInEveryTextFormatPacksTheSame) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(8000, 1.0, Eigen::Vector3d(10, 20, 30), pts, nrm);
+  test::writePointsPly(d.file("s.ply"), pts, &nrm);
+  std::ofstream xyz(d.file("s.xyz")), csv(d.file("s.csv")), ptsf(d.file("s.pts"));
+  csv << "x,y,z,nx,ny,nz\n";
+  ptsf << pts.size() << "\n";
+  char line[256];
+  for (size_t i = 0; i < pts.size(); ++i) {
+    std::snprintf(line, sizeof(line), "%.17g %.17g %.17g %.9g %.9g %.9g\n", pts[i].x(), pts[i].y(), pts[i].z(),
+                  nrm[i].x(), nrm[i].y(), nrm[i].z());
+    xyz << line;
+    ptsf << line;
+    std::snprintf(line, sizeof(line), "%.17g,%.17g,%.17g,%.9g,%.9g,%.9g\n", pts[i].x(), pts[i].y(), pts[i].z(),
+                  nrm[i].x(), nrm[i].y(), nrm[i].z());
+    csv << line;
+  }
+  xyz.close();
+  csv.close();
+  ptsf.close();
+  std::vector<PackSummary> sums;
+  for (const char* f : {"s.ply", "s.xyz", "s.csv", "s.pts"}) {
+    auto in = InputSet::open({d.file(f)}, std::string(f) == "s.csv" ? "" : (std::string(f) == "s.ply" ? "" : "x,y,z,nx,ny,nz"));
+    ASSERT_TRUE(in.isOk()) << f << ": " << in.status().message();
+    PackSummary s;
+    ASSERT_TRUE(packInput(*in, d.file(std::string(f) + ".hfa"), PackOptions{}, nullptr, s).isOk()) << f;
+    EXPECT_FALSE(s.normalsEstimated) << f;
+    sums.push_back(s);
+  }
+  for (size_t i = 1; i < sums.size(); ++i) {
+    EXPECT_EQ(sums[i].pointsRead, sums[0].pointsRead);
+    EXPECT_EQ(sums[i].cells, sums[0].cells);
+    EXPECT_EQ(sums[i].texels, sums[0].texels);
+  }
+}
+
+}  // namespace
+}  // namespace sa
