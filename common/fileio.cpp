@@ -1,6 +1,7 @@
 #include "common/fileio.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -76,7 +77,8 @@ AtomicFile::~AtomicFile() { abandon(); }
 
 Status AtomicFile::open(const std::string& path) {
   path_ = path;
-  std::string tmpl = path + ".tmp-XXXXXX";
+  // The writer's PID in the name lets a later run recognise leftovers of a killed writer.
+  std::string tmpl = path + ".tmp-" + std::to_string(getpid()) + "-XXXXXX";
   std::vector<char> buf(tmpl.begin(), tmpl.end());
   buf.push_back('\0');
   fd_ = mkstemp(buf.data());
@@ -130,13 +132,33 @@ ScratchDir::~ScratchDir() {
 }
 
 Status ScratchDir::create(const std::string& parent, const std::string& prefix) {
-  std::string tmpl = joinPath(parent, prefix + "XXXXXX");
+  std::string tmpl = joinPath(parent, prefix + std::to_string(getpid()) + "-XXXXXX");
   std::vector<char> buf(tmpl.begin(), tmpl.end());
   buf.push_back('\0');
   if (!mkdtemp(buf.data()))
     return Status::badInput(parent + ": cannot create scratch directory: " + std::strerror(errno));
   path_ = buf.data();
   return Status::ok();
+}
+
+size_t removeStaleTemporaries(const std::string& dir, const std::string& prefix) {
+  size_t removed = 0;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    // <prefix><pid>-XXXXXX
+    const std::string rest = name.substr(prefix.size());
+    const size_t dash = rest.find('-');
+    if (dash == std::string::npos || dash == 0) continue;
+    char* end = nullptr;
+    const long pid = std::strtol(rest.substr(0, dash).c_str(), &end, 10);
+    if (!end || *end != '\0' || pid <= 0) continue;
+    if (kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // the writer is alive (or not ours to judge)
+    std::error_code rec;
+    if (std::filesystem::remove_all(e.path(), rec) > 0 && !rec) ++removed;
+  }
+  return removed;
 }
 
 std::string directoryOf(const std::string& path) {

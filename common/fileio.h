@@ -82,6 +82,10 @@ class ScratchDir {
   std::string path_;
 };
 
+// Removes entries of `dir` named <prefix><pid>-... whose writer process no longer exists (left by
+// a killed run). Returns how many were removed.
+size_t removeStaleTemporaries(const std::string& dir, const std::string& prefix);
+
 std::string directoryOf(const std::string& path);
 std::string joinPath(const std::string& dir, const std::string& name);
 Status writeFileAtomic(const std::string& path, const void* data, size_t n);

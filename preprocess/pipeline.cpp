@@ -147,9 +147,12 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
 
   // ---- pass 2: distribute into chunks ----
   t0 = Clock::now();
+  // Leftovers of a killed pack (chunk directories, a partial output) are removed, not reused.
+  const std::string scratchParent = opt.scratchParent.empty() ? directoryOf(outPath) : opt.scratchParent;
+  removeStaleTemporaries(scratchParent, ".scanatlas-chunks-");
+  removeStaleTemporaries(directoryOf(outPath), std::filesystem::path(outPath).filename().string() + ".tmp-");
   ScratchDir scratch;
-  SA_RETURN_IF_ERROR(scratch.create(opt.scratchParent.empty() ? directoryOf(outPath) : opt.scratchParent,
-                                    ".scanatlas-chunks-"));
+  SA_RETURN_IF_ERROR(scratch.create(scratchParent, ".scanatlas-chunks-"));
   DistributeOptions dopt;
   dopt.maxPointsPerChunk = std::max<uint64_t>(1024, opt.memBudget / kBytesPerPointInFlight);
   dopt.scratchDir = scratch.path();

@@ -124,3 +124,70 @@ TEST(Cli, PackInfoBenchEvalJson) {
 
 }  // namespace
 }  // namespace sa
+
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+#include "atlas/pack_file.h"
+#include "atlas/verify.h"
+
+extern char** environ;
+
+namespace sa {
+namespace {
+
+// kill -9 at several moments of a pack: never a file that looks like a pack unless it is a
+// complete one; the next pack removes what the killed one left (chunk files, partial output).
+TEST(Cli, KilledPackLeavesNoHalfWrittenPackAndIsCleanedUpNextTime) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(2000000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  test::writePointsPly(d.file("big.ply"), pts, &nrm);
+  const std::string out = d.file("big.hfa");
+  for (int delayMs : {150, 600, 1400}) {
+    std::filesystem::remove(out);
+    std::string bin = SA_BINARY, cmd = "pack", in = d.file("big.ply"), o = "-o", q = "-q", mem = "--mem-budget", m = "64M";
+    char* argv[] = {bin.data(), cmd.data(), in.data(), o.data(), const_cast<char*>(out.c_str()), mem.data(), m.data(), q.data(), nullptr};
+    pid_t pid;
+    ASSERT_EQ(posix_spawn(&pid, SA_BINARY, nullptr, nullptr, argv, environ), 0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(delayMs));
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    size_t leftovers = 0;
+    for (const auto& e : std::filesystem::directory_iterator(d.path())) {
+      const std::string name = e.path().filename().string();
+      if (name == "big.ply") continue;
+      if (name == "big.hfa") {  // only if the kill came after the rename: then it is complete
+        PackReader r;
+        ASSERT_TRUE(r.open(out).isOk()) << "killed at " << delayMs << " ms: big.hfa exists but does not open";
+        EXPECT_TRUE(verifyPack(r).problems.empty());
+        continue;
+      }
+      ++leftovers;
+      PackReader r;
+      EXPECT_FALSE(e.is_regular_file() && r.open(e.path().string()).isOk()) << name << " looks like a pack";
+    }
+    std::printf("killed after %d ms (%s): %zu temporary entries left\n", delayMs,
+                WIFSIGNALED(status) ? "by the signal" : "had finished", leftovers);
+  }
+  // A complete run cleans up every leftover.
+  std::filesystem::remove(out);
+  ASSERT_EQ(std::system((std::string(SA_BINARY) + " pack " + d.file("big.ply") + " -o " + out + " --mem-budget 64M -q").c_str()), 0);
+  for (const auto& e : std::filesystem::directory_iterator(d.path())) {
+    const std::string name = e.path().filename().string();
+    EXPECT_TRUE(name == "big.ply" || name == "big.hfa") << "left behind: " << name;
+  }
+  PackReader r;
+  ASSERT_TRUE(r.open(out).isOk());
+  EXPECT_TRUE(verifyPack(r).problems.empty());
+}
+
+}  // namespace
+}  // namespace sa
