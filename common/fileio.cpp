@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -23,7 +24,8 @@ Status BufferedReader::open(const std::string& path, size_t bufferBytes) {
   if (fstat(fileno(f_), &st) != 0 || !S_ISREG(st.st_mode))
     return Status::badInput(path + ": not a regular file");
   fileSize_ = static_cast<uint64_t>(st.st_size);
-  buf_.resize(bufferBytes);
+  // No bigger than the file (small inputs, and fuzzing, open many files).
+  buf_.resize(static_cast<size_t>(std::min<uint64_t>(bufferBytes, fileSize_ + 1)));
   return Status::ok();
 }
 
