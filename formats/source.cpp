@@ -5,6 +5,7 @@
 
 #include "formats/conf.h"
 #include "formats/las.h"
+#include "formats/mesh_openmesh.h"
 #include "formats/text.h"
 #include "formats/ply.h"
 
@@ -118,6 +119,17 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
         set.files_.back().scanIndex = static_cast<int>(set.towardScanner_.size());
         set.towardScanner_.push_back(Eigen::Vector3d::UnitZ());
       }
+    } else if (ext == ".obj" || ext == ".off" || ext == ".stl") {
+      auto info = readMeshInfo(path);
+      if (!info) return info.status();
+      InputFile f;
+      f.path = path;
+      f.format = InputFormat::kMesh;
+      f.points = info->vertices;
+      f.hasNormals = info->hasNormals;
+      f.hasColors = info->hasColors;
+      f.hasFaces = info->triangles > 0;
+      set.files_.push_back(f);
     } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
       auto layout = readTextLayout(path, textColumns);
       if (!layout) return layout.status();
@@ -131,7 +143,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       set.files_.push_back(f);
     } else {
       return Status::badInput(path + ": unsupported input format '" + ext +
-                              "' (supported: .ply, .conf scan sets, .las, .xyz/.pts/.csv/.txt)");
+                              "' (supported: .ply, .conf scan sets, .las, .obj/.off/.stl, .xyz/.pts/.csv/.txt)");
     }
   }
   if (set.files_.size() > 1) {
@@ -176,6 +188,8 @@ Status InputSet::stream(BatchSink& sink, bool readTriangles, size_t batchPoints)
     FileAdapter adapter(sink, f, keepNormals, wantColors, base);
     if (f.format == InputFormat::kLas) {
       SA_RETURN_IF_ERROR(readLas(f.path, batchPoints, adapter));
+    } else if (f.format == InputFormat::kMesh) {
+      SA_RETURN_IF_ERROR(readMesh(f.path, batchPoints, readTriangles && hasTriangles(), adapter));
     } else if (f.format == InputFormat::kText) {
       auto layout = readTextLayout(f.path, f.columns);
       if (!layout) return layout.status();

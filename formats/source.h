@@ -10,7 +10,7 @@
 
 namespace sa {
 
-enum class InputFormat { kPly, kLas, kText };
+enum class InputFormat { kPly, kLas, kText, kMesh };
 
 struct InputFile {
   std::string path;

@@ -2,9 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <map>
 #include <cstring>
 #include <fstream>
+
+#include <Eigen/Geometry>
 
 #include "../common/test_util.h"
 
@@ -178,6 +182,90 @@ TEST(Text, SameCloudInEveryTextFormatPacksTheSame) {
     EXPECT_EQ(sums[i].pointsRead, sums[0].pointsRead);
     EXPECT_EQ(sums[i].cells, sums[0].cells);
     EXPECT_EQ(sums[i].texels, sums[0].texels);
+  }
+}
+
+}  // namespace
+}  // namespace sa
+
+namespace sa {
+namespace {
+
+// A subdivided octahedron on the unit sphere (closed, genus 0).
+void sphereMesh(int levels, std::vector<Eigen::Vector3d>& v, std::vector<std::array<int, 3>>& f) {
+  v = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  f = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  for (int l = 0; l < levels; ++l) {
+    std::map<std::pair<int, int>, int> mid;
+    auto m = [&](int a, int b) {
+      auto k = std::minmax(a, b);
+      auto it = mid.find(k);
+      if (it != mid.end()) return it->second;
+      v.push_back((v[size_t(a)] + v[size_t(b)]).normalized());
+      return mid[k] = int(v.size()) - 1;
+    };
+    std::vector<std::array<int, 3>> g;
+    for (auto& t : f) {
+      const int a = m(t[0], t[1]), b = m(t[1], t[2]), c = m(t[2], t[0]);
+      g.push_back({t[0], a, c});
+      g.push_back({t[1], b, a});
+      g.push_back({t[2], c, b});
+      g.push_back({a, b, c});
+    }
+    f = g;
+  }
+}
+
+// The same mesh as PLY, OBJ, OFF and STL (OpenMesh reads the last three) packs to the same cells.
+TEST(Mesh, SameMeshInPlyObjOffStlPacksTheSame) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> v;
+  std::vector<std::array<int, 3>> f;
+  sphereMesh(4, v, f);
+  std::ofstream ply(d.file("m.ply")), obj(d.file("m.obj")), off(d.file("m.off")), stl(d.file("m.stl"));
+  ply.precision(17);
+  obj.precision(17);
+  off.precision(17);
+  stl.precision(17);
+  ply << "ply\nformat ascii 1.0\nelement vertex " << v.size() << "\nproperty double x\nproperty double y\nproperty double z\n"
+      << "element face " << f.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
+  off << "OFF\n" << v.size() << " " << f.size() << " 0\n";
+  stl << "solid m\n";
+  for (auto& p : v) {
+    ply << p.x() << " " << p.y() << " " << p.z() << "\n";
+    obj << "v " << p.x() << " " << p.y() << " " << p.z() << "\n";
+    off << p.x() << " " << p.y() << " " << p.z() << "\n";
+  }
+  for (auto& t : f) {
+    ply << "3 " << t[0] << " " << t[1] << " " << t[2] << "\n";
+    obj << "f " << t[0] + 1 << " " << t[1] + 1 << " " << t[2] + 1 << "\n";
+    off << "3 " << t[0] << " " << t[1] << " " << t[2] << "\n";
+    const Eigen::Vector3d n = (v[size_t(t[1])] - v[size_t(t[0])]).cross(v[size_t(t[2])] - v[size_t(t[0])]).normalized();
+    stl << "facet normal " << n.x() << " " << n.y() << " " << n.z() << "\nouter loop\n";
+    for (int k = 0; k < 3; ++k) stl << "vertex " << v[size_t(t[k])].x() << " " << v[size_t(t[k])].y() << " " << v[size_t(t[k])].z() << "\n";
+    stl << "endloop\nendfacet\n";
+  }
+  stl << "endsolid m\n";
+  ply.close();
+  obj.close();
+  off.close();
+  stl.close();
+  std::vector<PackSummary> sums;
+  for (const char* name : {"m.ply", "m.obj", "m.off", "m.stl"}) {
+    auto in = InputSet::open({d.file(name)});
+    ASSERT_TRUE(in.isOk()) << name << ": " << in.status().message();
+    EXPECT_TRUE(in->hasTriangles()) << name;
+    PackSummary s;
+    ASSERT_TRUE(packInput(*in, d.file(std::string(name) + ".hfa"), PackOptions{}, nullptr, s).isOk()) << name;
+    EXPECT_TRUE(s.fromTriangles) << name;
+    std::printf("%s: %llu vertices, %llu triangles -> %u cells, %llu texels\n", name, (unsigned long long)s.pointsRead,
+                (unsigned long long)s.triangles, s.cells, (unsigned long long)s.texels);
+    sums.push_back(s);
+  }
+  for (size_t i = 1; i < sums.size(); ++i) {
+    EXPECT_EQ(sums[i].triangles, sums[0].triangles);
+    EXPECT_EQ(sums[i].pointsRead, sums[0].pointsRead);  // STL's repeated corners are welded by OpenMesh
+    EXPECT_EQ(sums[i].cells, sums[0].cells);
   }
 }
 
