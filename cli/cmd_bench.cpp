@@ -150,10 +150,7 @@ int cmdBench(int argc, char** argv) {
   const bool quiet = a.flag("quiet") || a.flag("json");
   if (std::find(modes.begin(), modes.end(), RenderMode::kPoints) != modes.end()) {
     if (!quiet) std::fprintf(stderr, "bench: reading the source points for the points baseline...\n");
-    SourcePoints pts;
-    s = loadSourcePoints(pack, pts);
-    if (!s) return reportError(s);
-    s = renderer.setPoints(pts.xyz, pts.rgba, pack.meta().sampleSpacing);
+    s = uploadSourcePoints(pack, renderer);
     if (!s) return reportError(s);
   }
   std::ostringstream csv;

@@ -115,10 +115,7 @@ int cmdEval(int argc, char** argv) {
   s = renderer.init(pack);
   if (!s) return reportError(s);
   if (std::find(modes.begin(), modes.end(), RenderMode::kPoints) != modes.end()) {
-    SourcePoints pts;
-    s = loadSourcePoints(pack, pts);
-    if (!s) return reportError(s);
-    s = renderer.setPoints(pts.xyz, pts.rgba, pack.meta().sampleSpacing);
+    s = uploadSourcePoints(pack, renderer);
     if (!s) return reportError(s);
   }
   std::ostringstream csv;

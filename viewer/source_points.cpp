@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "formats/source.h"
+#include "viewer/renderer.h"
 
 namespace sa {
 namespace {
@@ -64,6 +65,12 @@ Status loadSourcePoints(const PackReader& pack, SourcePoints& out) {
   out.rgba.reserve(input->pointCount() * 4);
   ToFloats sink(pack.meta().origin, out);
   return input->stream(sink, false);
+}
+
+Status uploadSourcePoints(const PackReader& pack, Renderer& renderer) {
+  SourcePoints pts;
+  SA_RETURN_IF_ERROR(loadSourcePoints(pack, pts));
+  return renderer.setPoints(pts.xyz, pts.rgba, pack.meta().sampleSpacing);
 }
 
 }  // namespace sa

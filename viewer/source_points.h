@@ -18,4 +18,8 @@ struct SourcePoints {
 
 Status loadSourcePoints(const PackReader& pack, SourcePoints& out);
 
+class Renderer;
+// Reads the pack's sources and hands them to the renderer's points baseline.
+Status uploadSourcePoints(const PackReader& pack, Renderer& renderer);
+
 }  // namespace sa

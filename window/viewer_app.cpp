@@ -273,9 +273,7 @@ void drawPanel(AppState& s, GLFWwindow* win) {
     const char* modes[] = {"parallax (height fields)", "points (source splats)"};
     if (ImGui::Combo("mode", &mode, modes, 2)) {
       if (mode == 1 && !s.renderer->hasPoints()) {
-        SourcePoints pts;
-        Status ls = loadSourcePoints(s.pack, pts);
-        if (ls) ls = s.renderer->setPoints(pts.xyz, pts.rgba, s.pack.meta().sampleSpacing);
+        Status ls = uploadSourcePoints(s.pack, *s.renderer);
         if (!ls) {
           s.status = ls.message();
           mode = 0;
