@@ -123,6 +123,14 @@ int cmdRender(int argc, char** argv) {
   rs.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
   rs.cull.subpixelSplats = !a.flag("no-splats");
   rs.cull.frontToBack = !a.flag("no-sort");
+  // Output folders are created as needed (render -o views/bunny.png).
+  for (const char* opt : {"output", "depth-out"}) {
+    if (!a.has(opt)) continue;
+    const std::filesystem::path dir = std::filesystem::path(a.get(opt)).parent_path();
+    std::error_code ec;
+    if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+    if (ec) return reportError(Status::badInput(dir.string() + ": cannot create the output folder: " + ec.message()));
+  }
   EglContext ctx;
   s = ctx.init();
   if (!s) return reportError(s);
