@@ -153,8 +153,9 @@ size_t removeStaleTemporaries(const std::string& dir, const std::string& prefix)
     const std::string rest = name.substr(prefix.size());
     const size_t dash = rest.find('-');
     if (dash == std::string::npos || dash == 0) continue;
+    const std::string pidText = rest.substr(0, dash);  // `end` points into it: keep it alive
     char* end = nullptr;
-    const long pid = std::strtol(rest.substr(0, dash).c_str(), &end, 10);
+    const long pid = std::strtol(pidText.c_str(), &end, 10);
     if (!end || *end != '\0' || pid <= 0) continue;
     if (kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // the writer is alive (or not ours to judge)
     std::error_code rec;
