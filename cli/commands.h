@@ -12,6 +12,7 @@ int cmdBench(int argc, char** argv);
 int cmdEval(int argc, char** argv);
 int cmdView(int argc, char** argv);
 int cmdVerify(int argc, char** argv);
+int cmdConvert(int argc, char** argv);
 int reportError(const Status& s);
 std::string jsonEscape(const std::string& s);
 }  // namespace sa

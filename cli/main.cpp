@@ -14,10 +14,13 @@ const char* kUsage =
     "usage: scanatlas <command> [options]\n"
     "\n"
     "commands:\n"
-    "  pack    convert scans (PLY, Stanford .conf scan sets) into a pack file (.hfa)\n"
+    "  pack    convert scans into a pack file (.hfa): PLY, Stanford .conf scan sets, PCD, Draco,\n"
+    "          LAS, OBJ/OFF/STL, XYZ/PTS/CSV/TXT, several at once\n"
+    "  convert write the points of any of those inputs as binary PLY, Draco or text\n"
     "  view    the interactive window (a scan is packed into a cache beside it first)\n"
     "  render  render views of a pack headless to PNG (and depth to PFM)\n"
-    "  info    describe a pack: cells, levels, texels, bytes, bounds, timings\n"
+    "  info    describe a pack (cells, levels, texels, bytes, bounds, timings) or input files\n"
+    "          (format, points, attributes, bounds)\n"
     "  verify  check a pack completely: checksums, tile layout, gutters, frames, counts\n"
     "  bench   frame times over a camera path, per mode and setting (GPU and CPU time, boxes, fragments)\n"
     "  eval    image error against a reference mesh or scan set, with frame times; trade-off plot\n"
@@ -74,6 +77,7 @@ int main(int argc, char** argv) {
   if (cmd == "render") return sa::cmdRender(argc - 2, argv + 2);
   if (cmd == "view") return sa::cmdView(argc - 2, argv + 2);
   if (cmd == "info") return sa::cmdInfo(argc - 2, argv + 2);
+  if (cmd == "convert") return sa::cmdConvert(argc - 2, argv + 2);
   if (cmd == "verify") return sa::cmdVerify(argc - 2, argv + 2);
   if (cmd == "bench") return sa::cmdBench(argc - 2, argv + 2);
   if (cmd == "eval") return sa::cmdEval(argc - 2, argv + 2);

@@ -109,11 +109,17 @@ Status readLas(const std::string& path, size_t batchPoints, BatchSink& sink, Las
     b.firstIndex = done;
     b.x.resize(n); b.y.resize(n); b.z.resize(n);
     if (L.hasColor) { b.r.resize(n); b.g.resize(n); b.b.resize(n); }
+    b.intensity.resize(n);
+    b.classification.resize(n);
+    // Classification: 5 bits of byte 15 in formats 0-5, the whole byte 16 in formats 6-10.
+    const bool extended = L.pointFormat >= 6;
     for (size_t i = 0; i < n; ++i) {
       const uint8_t* p = buf.data() + i * L.recordLength;
       b.x[i] = get<int32_t>(p) * L.scale[0] + L.offset[0];
       b.y[i] = get<int32_t>(p + 4) * L.scale[1] + L.offset[1];
       b.z[i] = get<int32_t>(p + 8) * L.scale[2] + L.offset[2];
+      b.intensity[i] = float(get<uint16_t>(p + 12));
+      b.classification[i] = extended ? p[16] : uint8_t(p[15] & 0x1F);
       if (L.hasColor) {
         const int sh = L.color8bit ? 0 : 8;
         b.r[i] = uint8_t(std::min<int>(255, get<uint16_t>(p + L.colorOffset) >> sh));

@@ -1,5 +1,5 @@
 // ASPRS LAS 1.0-1.4, point data formats 0-10 (own reader: Debian ships no LAS library).
-// Positions are X*scale + offset in double; RGB (formats 2, 3, 5, 7, 8, 10) scaled to 8 bits,
+// Positions are X*scale + offset in double; intensity and classification kept as attributes; RGB (formats 2, 3, 5, 7, 8, 10) scaled to 8 bits,
 // or taken as is when the file stores 8-bit values in its 16-bit fields (as autzen does).
 // LAZ (compressed) is refused with a message on how to decompress it.
 #pragma once

@@ -66,7 +66,7 @@ inline double decodeBinary(const unsigned char* p, int t, bool swap) {
 }
 
 // Role of a vertex property in our batch.
-enum Role { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kR, kG, kB };
+enum Role { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kR, kG, kB, kIntensity, kConfidence, kRoleCount };
 
 int roleOf(const std::string& n) {
   if (n == "x") return kX;
@@ -78,6 +78,8 @@ int roleOf(const std::string& n) {
   if (n == "red" || n == "r" || n == "diffuse_red") return kR;
   if (n == "green" || n == "g" || n == "diffuse_green") return kG;
   if (n == "blue" || n == "b" || n == "diffuse_blue") return kB;
+  if (n == "intensity" || n == "scalar_intensity") return kIntensity;
+  if (n == "confidence" || n == "scalar_confidence") return kConfidence;
   return kNone;
 }
 
@@ -183,6 +185,8 @@ class PlyParser {
           if (r >= kX && r <= kZ && !p.isList) pos[r] = true;
           if (r >= kNX && r <= kNZ && !p.isList) n[r - kNX] = true;
           if (r >= kR && r <= kB && !p.isList) c[r - kR] = true;
+          if (r == kIntensity && !p.isList) hdr_.hasIntensity = true;
+          if (r == kConfidence && !p.isList) hdr_.hasConfidence = true;
         }
         if (!(pos[0] && pos[1] && pos[2]))
           return Status::badInput(path_ + ": vertex element lacks x, y or z properties");
@@ -294,8 +298,9 @@ class PlyParser {
     }
     PointBatch batch;
     const bool wantN = hdr_.hasNormals, wantC = hdr_.hasColors;
+    const bool wantI = hdr_.hasIntensity, wantK = hdr_.hasConfidence;
     std::vector<unsigned char> raw;
-    double vals[9];
+    double vals[kRoleCount] = {};
     uint64_t done = 0;
     while (done < e.count) {
       size_t n = static_cast<size_t>(std::min<uint64_t>(opt_.batchPoints, e.count - done));
@@ -304,6 +309,8 @@ class PlyParser {
       batch.x.resize(n); batch.y.resize(n); batch.z.resize(n);
       if (wantN) { batch.nx.resize(n); batch.ny.resize(n); batch.nz.resize(n); }
       if (wantC) { batch.r.resize(n); batch.g.resize(n); batch.b.resize(n); }
+      if (wantI) batch.intensity.resize(n);
+      if (wantK) batch.confidence.resize(n);
       if (binary() && fixed) raw.resize(n * recordSize);
       if (binary() && fixed && !in_.read(raw.data(), raw.size()))
         return truncated("vertex " + std::to_string(done) + " of " + std::to_string(e.count));
@@ -336,6 +343,8 @@ class PlyParser {
           batch.g[i] = static_cast<uint8_t>(std::clamp(vals[kG], 0.0, 255.0));
           batch.b[i] = static_cast<uint8_t>(std::clamp(vals[kB], 0.0, 255.0));
         }
+        if (wantI) batch.intensity[i] = static_cast<float>(vals[kIntensity]);
+        if (wantK) batch.confidence[i] = static_cast<float>(vals[kConfidence]);
       }
       done += n;
       if (sink_) SA_RETURN_IF_ERROR(sink_->onPoints(batch));

@@ -1,5 +1,6 @@
 // Streaming PLY reader: ascii, binary_little_endian and binary_big_endian; any property order
 // and type; normals (nx ny nz) and colours (red green blue / r g b / diffuse_*) when present;
+// `intensity` and `confidence` kept as attributes;
 // `face` lists fan-triangulated; `tristrips` decoded (-1 restarts); every other element
 // (range_grid, ...) skipped. Memory is bounded by the batch size, not the file size.
 #pragma once
@@ -34,6 +35,7 @@ struct PlyHeader {
   uint64_t headerBytes = 0;
   uint64_t vertexCount = 0;
   bool hasNormals = false, hasColors = false;
+  bool hasIntensity = false, hasConfidence = false;  // scalar `intensity` / `confidence` properties
   bool hasFaces = false;  // a face or tristrips element with entries
 };
 

@@ -13,14 +13,23 @@ struct PointBatch {
   std::vector<float> nx, ny, nz;   // empty when the source has no normals
   std::vector<uint8_t> r, g, b;    // empty when the source has no colours
   std::vector<uint16_t> scan;      // scan index inside a scan set; empty for single files
+  // Per-point scanner attributes, empty when the source has none: return strength (LAS
+  // intensity, PLY `intensity`, PCD `intensity`), range-scan confidence (PLY `confidence`),
+  // ASPRS class (LAS classification).
+  std::vector<float> intensity, confidence;
+  std::vector<uint8_t> classification;
   uint64_t firstIndex = 0;         // index of the first point of this batch in its file
 
   size_t size() const { return x.size(); }
   bool hasNormals() const { return !nx.empty(); }
   bool hasColors() const { return !r.empty(); }
+  bool hasIntensity() const { return !intensity.empty(); }
+  bool hasConfidence() const { return !confidence.empty(); }
+  bool hasClassification() const { return !classification.empty(); }
   void clear() {
     x.clear(); y.clear(); z.clear(); nx.clear(); ny.clear(); nz.clear();
     r.clear(); g.clear(); b.clear(); scan.clear();
+    intensity.clear(); confidence.clear(); classification.clear();
   }
 };
 

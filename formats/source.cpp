@@ -4,6 +4,8 @@
 #include <filesystem>
 
 #include "formats/conf.h"
+#include "formats/draco.h"
+#include "formats/pcd.h"
 #include "formats/las.h"
 #include "formats/mesh_openmesh.h"
 #include "formats/text.h"
@@ -27,6 +29,9 @@ Status addPly(const std::string& path, std::vector<InputFile>& out, std::vector<
   f.hasNormals = h->hasNormals;
   f.hasColors = h->hasColors;
   f.hasFaces = h->hasFaces;
+  f.hasIntensity = h->hasIntensity;
+  f.hasConfidence = h->hasConfidence;
+  f.detail = h->format == PlyFormat::kAscii ? "ascii" : h->format == PlyFormat::kBinaryLittle ? "binary_little_endian" : "binary_big_endian";
   for (auto& w : h->warnings) warnings.push_back(w);
   out.push_back(f);
   return Status::ok();
@@ -43,6 +48,10 @@ Status addLas(const std::string& path, std::vector<InputFile>& out, bool& terrai
   f.format = InputFormat::kLas;
   f.points = h->pointCount;
   f.hasColors = h->hasColor;
+  f.hasIntensity = true;
+  f.hasClassification = true;
+  f.detail = "LAS " + std::to_string(h->versionMajor) + "." + std::to_string(h->versionMinor) + ", point format " +
+             std::to_string(h->pointFormat) + (h->hasColor ? (h->color8bit ? ", 8-bit colour in 16-bit fields" : ", 16-bit colour") : "");
   out.push_back(f);
   return Status::ok();
 }
@@ -50,10 +59,14 @@ Status addLas(const std::string& path, std::vector<InputFile>& out, bool& terrai
 // Adapts one file's batches: alignment transform, scan index, attribute harmonisation.
 class FileAdapter : public BatchSink {
  public:
-  FileAdapter(BatchSink& next, const InputFile& f, bool keepNormals, bool wantColors, uint64_t base)
-      : next_(next), f_(f), keepNormals_(keepNormals), wantColors_(wantColors), base_(base) {}
+  FileAdapter(BatchSink& next, const InputFile& f, bool keepNormals, bool wantColors, bool keepI, bool keepC,
+              bool keepK, uint64_t base)
+      : next_(next), f_(f), keepNormals_(keepNormals), wantColors_(wantColors), keepI_(keepI), keepC_(keepC),
+        keepK_(keepK), base_(base) {}
   Status onPoints(const PointBatch& in) override {
-    const bool touch = f_.transformed || (!keepNormals_ && in.hasNormals()) ||
+    const bool drop = (!keepI_ && in.hasIntensity()) || (!keepC_ && in.hasConfidence()) ||
+                      (!keepK_ && in.hasClassification());
+    const bool touch = f_.transformed || (!keepNormals_ && in.hasNormals()) || drop ||
                        (wantColors_ && !in.hasColors()) || f_.scanIndex >= 0 || base_ != 0;
     if (!touch) return next_.onPoints(in);
     out_ = in;
@@ -70,6 +83,9 @@ class FileAdapter : public BatchSink {
       }
     }
     if (!keepNormals_) { out_.nx.clear(); out_.ny.clear(); out_.nz.clear(); }
+    if (!keepI_) out_.intensity.clear();
+    if (!keepC_) out_.confidence.clear();
+    if (!keepK_) out_.classification.clear();
     if (wantColors_ && !in.hasColors()) { out_.r.assign(n, 255); out_.g.assign(n, 255); out_.b.assign(n, 255); }
     if (f_.scanIndex >= 0) out_.scan.assign(n, static_cast<uint16_t>(f_.scanIndex));
     return next_.onPoints(out_);
@@ -79,7 +95,7 @@ class FileAdapter : public BatchSink {
  private:
   BatchSink& next_;
   const InputFile& f_;
-  bool keepNormals_, wantColors_;
+  bool keepNormals_, wantColors_, keepI_, keepC_, keepK_;
   uint64_t base_;
   PointBatch out_;
 };
@@ -130,6 +146,36 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       f.hasColors = info->hasColors;
       f.hasFaces = info->triangles > 0;
       set.files_.push_back(f);
+    } else if (ext == ".pcd") {
+      auto h = readPcdHeader(path);
+      if (!h) return h.status();
+      InputFile f;
+      f.path = path;
+      f.format = InputFormat::kPcd;
+      f.points = h->points;
+      f.hasNormals = h->hasNormals;
+      f.hasColors = h->hasColors;
+      f.hasIntensity = h->hasIntensity;
+      const char* enc[] = {"ascii", "binary", "binary_compressed"};
+      f.detail = std::string(enc[int(h->encoding)]) +
+                 (h->organized() ? ", organized " + std::to_string(h->width) + "x" + std::to_string(h->height) : ", unorganized");
+      set.files_.push_back(f);
+    } else if (ext == ".drc") {
+      auto info = readDracoInfo(path);
+      if (!info) return info.status();
+      InputFile f;
+      f.path = path;
+      f.format = InputFormat::kDraco;
+      f.points = info->points;
+      f.hasNormals = info->hasNormals;
+      f.hasColors = info->hasColors;
+      f.hasFaces = info->triangles > 0;
+      f.hasIntensity = info->hasIntensity;
+      f.hasConfidence = info->hasConfidence;
+      f.hasClassification = info->hasClassification;
+      f.detail = info->triangles ? "mesh, " + std::to_string(info->triangles) + " triangles" : "point cloud";
+      if (info->shifted) f.detail += ", positions relative to a recorded origin";
+      set.files_.push_back(f);
     } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
       auto layout = readTextLayout(path, textColumns);
       if (!layout) return layout.status();
@@ -139,11 +185,14 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       f.points = layout->dataLines;
       f.hasNormals = layout->hasNormals;
       f.hasColors = layout->hasColors;
+      f.hasIntensity = layout->hasIntensity;
+      f.hasConfidence = layout->hasConfidence;
+      f.hasClassification = layout->hasClassification;
       f.columns = textColumns;
       set.files_.push_back(f);
     } else {
       return Status::badInput(path + ": unsupported input format '" + ext +
-                              "' (supported: .ply, .conf scan sets, .las, .obj/.off/.stl, .xyz/.pts/.csv/.txt)");
+                              "' (supported: .ply, .conf scan sets, .pcd, .drc, .las, .obj/.off/.stl, .xyz/.pts/.csv/.txt)");
     }
   }
   if (set.files_.size() > 1) {
@@ -176,6 +225,30 @@ bool InputSet::allHaveNormals() const {
   return std::all_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasNormals; });
 }
 
+bool InputSet::allHaveIntensity() const {
+  return std::all_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasIntensity; });
+}
+
+bool InputSet::allHaveConfidence() const {
+  return std::all_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasConfidence; });
+}
+
+bool InputSet::allHaveClassification() const {
+  return std::all_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasClassification; });
+}
+
+const char* formatName(InputFormat f) {
+  switch (f) {
+    case InputFormat::kPly: return "PLY";
+    case InputFormat::kLas: return "LAS";
+    case InputFormat::kText: return "text";
+    case InputFormat::kMesh: return "OBJ/OFF/STL";
+    case InputFormat::kPcd: return "PCD";
+    case InputFormat::kDraco: return "Draco";
+  }
+  return "?";
+}
+
 bool InputSet::anyHasColors() const {
   return std::any_of(files_.begin(), files_.end(), [](const InputFile& f) { return f.hasColors; });
 }
@@ -185,9 +258,14 @@ Status InputSet::stream(BatchSink& sink, bool readTriangles, size_t batchPoints)
   const bool wantColors = anyHasColors();
   uint64_t base = 0;
   for (const auto& f : files_) {
-    FileAdapter adapter(sink, f, keepNormals, wantColors, base);
+    FileAdapter adapter(sink, f, keepNormals, wantColors, allHaveIntensity(), allHaveConfidence(),
+                        allHaveClassification(), base);
     if (f.format == InputFormat::kLas) {
       SA_RETURN_IF_ERROR(readLas(f.path, batchPoints, adapter));
+    } else if (f.format == InputFormat::kPcd) {
+      SA_RETURN_IF_ERROR(readPcd(f.path, batchPoints, adapter));
+    } else if (f.format == InputFormat::kDraco) {
+      SA_RETURN_IF_ERROR(readDraco(f.path, batchPoints, readTriangles && hasTriangles(), adapter));
     } else if (f.format == InputFormat::kMesh) {
       SA_RETURN_IF_ERROR(readMesh(f.path, batchPoints, readTriangles && hasTriangles(), adapter));
     } else if (f.format == InputFormat::kText) {

@@ -10,13 +10,17 @@
 
 namespace sa {
 
-enum class InputFormat { kPly, kLas, kText, kMesh };
+enum class InputFormat { kPly, kLas, kText, kMesh, kPcd, kDraco };
+
+const char* formatName(InputFormat f);
 
 struct InputFile {
   std::string path;
   InputFormat format = InputFormat::kPly;
   uint64_t points = 0;
   bool hasNormals = false, hasColors = false, hasFaces = false;
+  bool hasIntensity = false, hasConfidence = false, hasClassification = false;
+  std::string detail;           // format details for `info` (encoding, organization, version)
   bool transformed = false;     // member of a scan set
   std::string columns;          // text inputs: the --columns spec (may be empty)
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
@@ -33,6 +37,10 @@ class InputSet {
   uint64_t pointCount() const;
   bool allHaveNormals() const;
   bool anyHasColors() const;
+  // Scanner attributes are kept when every file has them.
+  bool allHaveIntensity() const;
+  bool allHaveConfidence() const;
+  bool allHaveClassification() const;
   // Triangles are used when the input is exactly one file with faces.
   bool hasTriangles() const { return files_.size() == 1 && files_[0].hasFaces; }
   // Per scan: direction from the surface toward the scanner (aligned coordinates).
@@ -44,8 +52,10 @@ class InputSet {
   const std::vector<std::string>& sourcePaths() const { return sourcePaths_; }
 
   // Streams every file in order. Point batches carry aligned positions, the scan index when
-  // the input is a scan set, normals only when every file has them, and colours when any
-  // file has them (white elsewhere). Triangles only when hasTriangles() and readTriangles.
+  // the input is a scan set, normals, intensity, confidence and classification only when every
+  // file has them, and colours when any file has them (white elsewhere). PCD entries without
+  // finite coordinates (organized clouds' holes) are left out, so a PCD file may deliver fewer
+  // points than InputFile::points. Triangles only when hasTriangles() and readTriangles.
   Status stream(BatchSink& sink, bool readTriangles, size_t batchPoints = kDefaultBatchPoints) const;
 
  private:

@@ -47,7 +47,8 @@ int roleOf(std::string n) {
   std::transform(n.begin(), n.end(), n.begin(), [](unsigned char c) { return std::tolower(c); });
   static const std::map<std::string, int> names = {
       {"x", 0}, {"y", 1}, {"z", 2}, {"nx", 3}, {"ny", 4}, {"nz", 5}, {"r", 6}, {"red", 6}, {"g", 7}, {"green", 7},
-      {"b", 8}, {"blue", 8}, {"i", 9}, {"intensity", 9}, {"_", -1}, {"-", -1}};
+      {"b", 8}, {"blue", 8}, {"i", 9}, {"intensity", 9}, {"c", 10}, {"class", 10}, {"classification", 10},
+      {"confidence", 11}, {"_", -1}, {"-", -1}};
   auto it = names.find(n);
   return it == names.end() ? -2 : it->second;
 }
@@ -99,7 +100,7 @@ Result<TextLayout> readTextLayout(const std::string& path, const std::string& co
                               " columns and no header line: say what they are with --columns (e.g. x,y,z,_,r,g,b)");
     names = split(it->second, ',');
   }
-  bool seen[10] = {};
+  bool seen[kTextRoles] = {};
   for (const auto& n : names) {
     const int r = roleOf(n);
     if (r == -2) {
@@ -107,7 +108,8 @@ Result<TextLayout> readTextLayout(const std::string& path, const std::string& co
         L.roles.push_back(-1);  // unknown header names are skipped columns
         continue;
       }
-      return Status::badInput(path + ": unknown column name '" + n + "' (x,y,z,nx,ny,nz,r,g,b,i or _ to skip)");
+      return Status::badInput(path + ": unknown column name '" + n +
+                              "' (x,y,z,nx,ny,nz,r,g,b,i,c,confidence or _ to skip)");
     }
     if (r >= 0) seen[r] = true;
     L.roles.push_back(r);
@@ -115,6 +117,9 @@ Result<TextLayout> readTextLayout(const std::string& path, const std::string& co
   if (!(seen[0] && seen[1] && seen[2])) return Status::badInput(path + ": the columns must include x, y and z");
   L.hasNormals = seen[3] && seen[4] && seen[5];
   L.hasColors = seen[6] && seen[7] && seen[8];
+  L.hasIntensity = seen[9];
+  L.hasClassification = seen[10];
+  L.hasConfidence = seen[11];
   return L;
 }
 
@@ -133,7 +138,7 @@ Status readText(const std::string& path, const TextLayout& L, size_t batchPoints
     b.firstIndex = done;
     return s;
   };
-  double v[10];
+  double v[kTextRoles];
   while (in.readLine(line)) {
     ++lineNo;
     if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#' || line[0] == '/') continue;
@@ -147,7 +152,7 @@ Status readText(const std::string& path, const TextLayout& L, size_t batchPoints
     if (f.size() < L.roles.size())
       return Status::badInput(path + ":" + std::to_string(lineNo) + ": expected " + std::to_string(L.roles.size()) +
                               " columns, found " + std::to_string(f.size()));
-    std::fill(v, v + 10, 0.0);
+    std::fill(v, v + kTextRoles, 0.0);
     for (size_t c = 0; c < L.roles.size(); ++c) {
       if (L.roles[c] < 0) continue;
       if (!number(f[c], v[L.roles[c]])) {
@@ -172,6 +177,9 @@ Status readText(const std::string& path, const TextLayout& L, size_t batchPoints
       b.g.push_back(uint8_t(std::clamp(v[7] * s, 0.0, 255.0)));
       b.b.push_back(uint8_t(std::clamp(v[8] * s, 0.0, 255.0)));
     }
+    if (L.hasIntensity) b.intensity.push_back(float(v[9]));
+    if (L.hasClassification) b.classification.push_back(uint8_t(std::clamp(v[10], 0.0, 255.0)));
+    if (L.hasConfidence) b.confidence.push_back(float(v[11]));
     if (b.size() >= batchPoints) SA_RETURN_IF_ERROR(flush());
   }
   return flush();

@@ -8,6 +8,7 @@ pkgs=(
   libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
   libglfw3-dev libimgui-dev xvfb xauth
   libgtest-dev libgmock-dev libbenchmark-dev nlohmann-json3-dev libxxhash-dev
+  libpcl-dev libdraco-dev
 )
 missing=()
 for p in "${pkgs[@]}"; do
