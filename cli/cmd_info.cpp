@@ -1,23 +1,151 @@
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <limits>
 #include <map>
 
 #include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "formats/source.h"
 
 namespace sa {
+namespace {
+
+// Reads every point of one input (bounded memory) for counts, bounds and attribute ranges.
+class InputStats : public BatchSink {
+ public:
+  Status onPoints(const PointBatch& b) override {
+    for (size_t i = 0; i < b.size(); ++i) {
+      const double p[3] = {b.x[i], b.y[i], b.z[i]};
+      if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) {
+        ++nonFinite;
+        continue;
+      }
+      ++finite;
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], p[a]);
+        hi[a] = std::max(hi[a], p[a]);
+      }
+      if (b.hasIntensity()) { iLo = std::min(iLo, b.intensity[i]); iHi = std::max(iHi, b.intensity[i]); }
+      if (b.hasConfidence()) { cLo = std::min(cLo, b.confidence[i]); cHi = std::max(cHi, b.confidence[i]); }
+      if (b.hasClassification()) ++classes[b.classification[i]];
+    }
+    return Status::ok();
+  }
+  Status onTriangles(const uint32_t*, size_t n) override {
+    triangles += n;
+    return Status::ok();
+  }
+  uint64_t finite = 0, nonFinite = 0, triangles = 0;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  float iLo = INFINITY, iHi = -INFINITY, cLo = INFINITY, cHi = -INFINITY;
+  std::map<int, uint64_t> classes;
+};
+
+int infoInputs(const std::vector<std::string>& paths, const std::string& columns, bool json) {
+  if (json) std::printf("{\"inputs\": [");
+  bool firstOut = true;
+  for (const auto& path : paths) {
+    auto in = InputSet::open({path}, columns);
+    if (!in) {
+      if (json) std::printf("]}\n");
+      return reportError(in.status());
+    }
+    InputStats st;
+    Status s = in->stream(st, in->hasTriangles());
+    if (!s) {
+      if (json) std::printf("]}\n");
+      return reportError(s);
+    }
+    const InputFile& f0 = in->files()[0];
+    std::string format = in->files().size() > 1 ? "scan set (" + std::to_string(in->files().size()) + " " +
+                                                      formatName(f0.format) + " files)"
+                                                : std::string(formatName(f0.format));
+    std::string attrs;
+    auto add = [&](bool on, const char* n) {
+      if (on) attrs += std::string(attrs.empty() ? "" : ",") + n;
+    };
+    add(in->allHaveNormals(), "normals");
+    add(in->anyHasColors(), "colors");
+    add(in->allHaveIntensity(), "intensity");
+    add(in->allHaveConfidence(), "confidence");
+    add(in->allHaveClassification(), "classification");
+    const uint64_t declared = in->pointCount();
+    const uint64_t delivered = st.finite + st.nonFinite;
+    const uint64_t holes = declared > delivered ? declared - delivered : 0;  // PCD NaN entries
+    if (json) {
+      std::printf("%s{\"file\": \"%s\", \"format\": \"%s\", \"detail\": \"%s\", \"declared_points\": %llu, "
+                  "\"points\": %llu, \"invalid_entries\": %llu, \"nonfinite_points\": %llu, \"triangles\": %llu, "
+                  "\"attributes\": \"%s\", \"bounds_min\": [%.17g, %.17g, %.17g], \"bounds_max\": [%.17g, %.17g, %.17g]",
+                  firstOut ? "" : ", ", jsonEscape(path).c_str(), jsonEscape(format).c_str(), jsonEscape(f0.detail).c_str(),
+                  (unsigned long long)declared, (unsigned long long)st.finite, (unsigned long long)holes,
+                  (unsigned long long)st.nonFinite, (unsigned long long)st.triangles, attrs.c_str(), st.lo[0], st.lo[1],
+                  st.lo[2], st.hi[0], st.hi[1], st.hi[2]);
+      if (in->allHaveIntensity() && st.finite) std::printf(", \"intensity\": [%.9g, %.9g]", st.iLo, st.iHi);
+      if (in->allHaveConfidence() && st.finite) std::printf(", \"confidence\": [%.9g, %.9g]", st.cLo, st.cHi);
+      if (in->allHaveClassification()) {
+        std::printf(", \"classes\": {");
+        bool first = true;
+        for (auto [c, n] : st.classes) {
+          std::printf("%s\"%d\": %llu", first ? "" : ", ", c, (unsigned long long)n);
+          first = false;
+        }
+        std::printf("}");
+      }
+      std::printf("}");
+    } else {
+      std::printf("input     %s\n", path.c_str());
+      std::printf("format    %s%s%s\n", format.c_str(), f0.detail.empty() ? "" : ", ", f0.detail.c_str());
+      std::printf("points    %llu", (unsigned long long)st.finite);
+      if (holes) std::printf(" (%llu invalid entries of %llu skipped)", (unsigned long long)holes, (unsigned long long)declared);
+      if (st.nonFinite) std::printf(" + %llu with NaN/Inf coordinates", (unsigned long long)st.nonFinite);
+      if (st.triangles) std::printf(", %llu triangles", (unsigned long long)st.triangles);
+      std::printf("\nattribs   %s\n", attrs.empty() ? "positions only" : ("positions," + attrs).c_str());
+      std::printf("bounds    [%.12g, %.12g, %.12g] .. [%.12g, %.12g, %.12g]\n", st.lo[0], st.lo[1], st.lo[2], st.hi[0],
+                  st.hi[1], st.hi[2]);
+      if (in->allHaveIntensity() && st.finite) std::printf("intensity %.9g .. %.9g\n", st.iLo, st.iHi);
+      if (in->allHaveConfidence() && st.finite) std::printf("confidence %.9g .. %.9g\n", st.cLo, st.cHi);
+      if (in->allHaveClassification()) {
+        std::printf("classes  ");
+        for (auto [c, n] : st.classes) std::printf(" %d:%llu", c, (unsigned long long)n);
+        std::printf("\n");
+      }
+      for (const auto& w : in->warnings()) std::printf("warning   %s\n", w.c_str());
+      if (&path != &paths.back()) std::printf("\n");
+    }
+    firstOut = false;
+  }
+  if (json) std::printf("]}\n");
+  return 0;
+}
+
+}  // namespace
 
 int cmdInfo(int argc, char** argv) {
   Args a;
-  Status s = a.parse(argc, argv, {}, {"json", "help"}, {{"h", "help"}});
+  Status s = a.parse(argc, argv, {"columns"}, {"json", "help"}, {{"h", "help"}});
   if (a.flag("help")) {
-    std::fputs("usage: scanatlas info PACK [--json]\n\n"
-               "Describes a pack: cells per octree level, texels, pages, bytes, bounds, the sample\n"
-               "spacing and texel size, and how long each packing phase took.\n",
+    std::fputs("usage: scanatlas info PACK.hfa [--json]\n"
+               "       scanatlas info INPUT... [--columns SPEC] [--json]\n\n"
+               "For a pack: cells per octree level, texels, pages, bytes, bounds, the sample spacing\n"
+               "and texel size, and how long each packing phase took.\n"
+               "For input files (any format `pack` reads): the format and its details, the points\n"
+               "(invalid PCD entries and NaN/Inf coordinates counted apart), triangles, attributes,\n"
+               "exact bounds, intensity and confidence ranges and the points per class. Every point is\n"
+               "read, in bounded memory.\n",
                stdout);
     return 0;
   }
   if (!s) return reportError(s);
+  if (a.positionals().empty()) return reportError(Status::badInput("info: give a pack or input files (see --help)"));
+  auto isPack = [](const std::string& p) {
+    std::string e = std::filesystem::path(p).extension().string();
+    std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+    return e == ".hfa";
+  };
+  if (!isPack(a.positionals()[0])) return infoInputs(a.positionals(), a.get("columns"), a.flag("json"));
   if (a.positionals().size() != 1) return reportError(Status::badInput("info: give exactly one pack (see --help)"));
   PackReader pack;
   s = pack.open(a.positionals()[0]);
