@@ -10,8 +10,17 @@
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
 #include <draco/mesh/mesh.h>
+#include <draco/core/varint_decoding.h>
 #include <draco/metadata/geometry_metadata.h>
+#include <draco/metadata/metadata_decoder.h>
 #include <draco/point_cloud/point_cloud.h>
+
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <csignal>
 
 #include "common/fileio.h"
 
@@ -19,6 +28,48 @@ namespace sa {
 namespace {
 
 constexpr uint64_t kMaxDracoFile = uint64_t(1) << 32;
+// Draco allocates its attribute arrays from the point count in the stream before it reads
+// any point (a 39-byte file claiming 10^9 points asked for 13 GB when fuzzed). Even the
+// best-compressing encodings need more than a sixteenth of a byte per point in practice.
+constexpr uint64_t kMaxPointsPerByte = 16;
+
+// Reads the point count a version-2 point cloud or sequential mesh declares, the way Draco's
+// decoders will (header, optional metadata, then the count), and refuses counts the file
+// cannot plausibly hold. Edgebreaker meshes check their counts against the buffer themselves.
+Status checkDeclaredCount(const std::string& path, const char* data, size_t size) {
+  if (size < 11) return Status::badInput(path + ": Draco header truncated (" + std::to_string(size) + " bytes)");
+  const uint8_t major = uint8_t(data[5]), type = uint8_t(data[7]), method = uint8_t(data[8]);
+  uint16_t flags;
+  std::memcpy(&flags, data + 9, 2);
+  if (major != 2) return Status::ok();
+  draco::DecoderBuffer buf;
+  buf.Init(data + 11, size - 11);
+  if (flags & 0x8000) {
+    draco::MetadataDecoder md;
+    draco::GeometryMetadata gm;
+    if (!md.DecodeGeometryMetadata(&buf, &gm)) return Status::badInput(path + ": Draco metadata is corrupt");
+  }
+  uint64_t points = 0;
+  if (type == draco::POINT_CLOUD) {
+    int32_t n = 0;
+    if (!buf.Decode(&n) || n < 0) return Status::badInput(path + ": Draco point count missing or negative");
+    points = uint64_t(n);
+  } else if (type == draco::TRIANGULAR_MESH && method == 0 && uint8_t(data[6]) >= 2) {
+    uint32_t faces = 0, n = 0;
+    if (!draco::DecodeVarint(&faces, &buf) || !draco::DecodeVarint(&n, &buf))
+      return Status::badInput(path + ": Draco mesh counts missing");
+    points = n;
+  } else {
+    return Status::ok();
+  }
+  if (points > kMaxPointsPerByte * size + 4096)
+    return Status::badInput(path + ": Draco stream declares " + std::to_string(points) + " points in a " +
+                            std::to_string(size) + "-byte file (corrupt or hostile; refused before decoding)");
+  return Status::ok();
+}
+
+bool usable(const draco::PointAttribute* a);
+const draco::PointAttribute* named(const draco::PointCloud& pc, draco::GeometryAttribute::Type t);
 
 struct Decoded {
   std::unique_ptr<draco::PointCloud> pc;
@@ -27,7 +78,7 @@ struct Decoded {
   bool shifted = false;
 };
 
-Result<Decoded> decode(const std::string& path) {
+Result<Decoded> decodeInProcess(const std::string& path) {
   auto size = fileSize(path);
   if (!size) return size.status();
   if (*size > kMaxDracoFile) return Status::badInput(path + ": Draco files over 4 GiB are not supported");
@@ -39,6 +90,7 @@ Result<Decoded> decode(const std::string& path) {
   if (got != bytes.size()) return Status::badInput(path + ": read error");
   if (bytes.size() < 5 || std::memcmp(bytes.data(), "DRACO", 5) != 0)
     return Status::badInput(path + ": not a Draco file (no DRACO signature at byte 0)");
+  SA_RETURN_IF_ERROR(checkDeclaredCount(path, bytes.data(), bytes.size()));
   draco::DecoderBuffer buf;
   buf.Init(bytes.data(), bytes.size());
   auto type = draco::Decoder::GetEncodedGeometryType(&buf);
@@ -57,8 +109,8 @@ Result<Decoded> decode(const std::string& path) {
   } else {
     return Status::badInput(path + ": Draco geometry type " + std::to_string(int(type.value())) + " is not supported");
   }
-  if (!d.pc->GetNamedAttribute(draco::GeometryAttribute::POSITION))
-    return Status::badInput(path + ": the Draco file has no position attribute");
+  if (!named(*d.pc, draco::GeometryAttribute::POSITION))
+    return Status::badInput(path + ": the Draco file has no usable position attribute");
   if (const auto* md = d.pc->GetMetadata()) {
     std::vector<double> o;
     if (md->GetEntryDoubleArray("scanatlas_origin", &o) && o.size() == 3 && std::isfinite(o[0]) &&
@@ -70,41 +122,47 @@ Result<Decoded> decode(const std::string& path) {
   return d;
 }
 
+// Attributes of a type ScanAtlas can convert (Draco's own conversion reads DT_BOOL bytes as
+// bool, which is undefined for bytes other than 0 and 1).
+bool usable(const draco::PointAttribute* a) {
+  return a && a->num_components() >= 1 && a->data_type() != draco::DT_BOOL && a->data_type() != draco::DT_INVALID &&
+         a->data_type() < draco::DT_TYPES_COUNT;
+}
+
+const draco::PointAttribute* named(const draco::PointCloud& pc, draco::GeometryAttribute::Type t) {
+  const draco::PointAttribute* a = pc.GetNamedAttribute(t);
+  return usable(a) ? a : nullptr;
+}
+
 const draco::PointAttribute* generic(const draco::PointCloud& pc, const char* name) {
   const int id = pc.GetAttributeIdByMetadataEntry("name", name);
   if (id < 0) return nullptr;
   const draco::PointAttribute* a = pc.attribute(id);
-  return a && a->num_components() >= 1 ? a : nullptr;
+  return usable(a) ? a : nullptr;
 }
 
-}  // namespace
-
-Result<DracoInfo> readDracoInfo(const std::string& path) {
-  auto d = decode(path);
-  if (!d) return d.status();
-  const draco::PointCloud& pc = *d->pc;
+DracoInfo infoOf(const Decoded& d) {
+  const draco::PointCloud& pc = *d.pc;
   DracoInfo info;
   info.points = pc.num_points();
-  info.triangles = d->mesh ? d->mesh->num_faces() : 0;
-  const auto* n = pc.GetNamedAttribute(draco::GeometryAttribute::NORMAL);
-  const auto* c = pc.GetNamedAttribute(draco::GeometryAttribute::COLOR);
+  info.triangles = d.mesh ? d.mesh->num_faces() : 0;
+  const auto* n = named(pc, draco::GeometryAttribute::NORMAL);
+  const auto* c = named(pc, draco::GeometryAttribute::COLOR);
   info.hasNormals = n && n->num_components() == 3;
   info.hasColors = c && c->num_components() >= 3;
   info.hasIntensity = generic(pc, "intensity") != nullptr;
   info.hasConfidence = generic(pc, "confidence") != nullptr;
   info.hasClassification = generic(pc, "classification") != nullptr;
-  info.shifted = d->shifted;
+  info.shifted = d.shifted;
   return info;
 }
 
-Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
-  auto d = decode(path);
-  if (!d) return d.status();
-  const draco::PointCloud& pc = *d->pc;
+Status streamDecoded(const std::string& path, const Decoded& d, size_t batchPoints, bool readTriangles, BatchSink& sink) {
+  const draco::PointCloud& pc = *d.pc;
   using GA = draco::GeometryAttribute;
-  const auto* pos = pc.GetNamedAttribute(GA::POSITION);
-  const auto* nor = pc.GetNamedAttribute(GA::NORMAL);
-  const auto* col = pc.GetNamedAttribute(GA::COLOR);
+  const auto* pos = named(pc, GA::POSITION);
+  const auto* nor = named(pc, GA::NORMAL);
+  const auto* col = named(pc, GA::COLOR);
   if (nor && nor->num_components() != 3) nor = nullptr;
   if (col && col->num_components() < 3) col = nullptr;
   const auto* inten = generic(pc, "intensity");
@@ -124,9 +182,9 @@ Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles
       double p[3] = {0, 0, 0};
       if (!pos->ConvertValue<double>(pos->mapped_index(pi), 3, p))
         return Status::badInput(path + ": point " + std::to_string(done + k) + ": unreadable position");
-      b.x.push_back(p[0] + d->origin[0]);
-      b.y.push_back(p[1] + d->origin[1]);
-      b.z.push_back(p[2] + d->origin[2]);
+      b.x.push_back(p[0] + d.origin[0]);
+      b.y.push_back(p[1] + d.origin[1]);
+      b.z.push_back(p[2] + d.origin[2]);
       if (nor) {
         float v[3] = {0, 0, 1};
         nor->ConvertValue<float>(nor->mapped_index(pi), 3, v);
@@ -148,7 +206,7 @@ Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles
       auto scalar = [&](const draco::PointAttribute* a) {
         float v = 0;
         a->ConvertValue<float>(a->mapped_index(pi), 1, &v);
-        return v;
+        return std::isfinite(v) ? v : 0.0f;
       };
       if (inten) b.intensity.push_back(scalar(inten));
       if (conf) b.confidence.push_back(scalar(conf));
@@ -156,11 +214,11 @@ Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles
     }
     SA_RETURN_IF_ERROR(sink.onPoints(b));
   }
-  if (readTriangles && d->mesh) {
+  if (readTriangles && d.mesh) {
     std::vector<uint32_t> tris;
-    const uint32_t faces = d->mesh->num_faces();
+    const uint32_t faces = d.mesh->num_faces();
     for (uint32_t f = 0; f < faces; ++f) {
-      const auto& face = d->mesh->face(draco::FaceIndex(f));
+      const auto& face = d.mesh->face(draco::FaceIndex(f));
       for (int k = 0; k < 3; ++k) {
         const uint32_t v = face[k].value();
         if (v >= n) return Status::badInput(path + ": face " + std::to_string(f) + " refers to point " + std::to_string(v) + " of " + std::to_string(n));
@@ -174,6 +232,229 @@ Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles
     if (!tris.empty()) SA_RETURN_IF_ERROR(sink.onTriangles(tris.data(), tris.size() / 3));
   }
   return Status::ok();
+}
+
+// ---- Decoding in a child process ----------------------------------------------------------
+// libdraco is not hardened against hostile streams: fuzzing found 29-byte files that make it
+// allocate 8 GB inside its kd-tree attribute decoder, past any count a header check can see.
+// So the decoder runs in a forked child under an address-space limit; the child sends the
+// points back over a pipe in batches and a crash or an exhausted limit in the child becomes a
+// clear error here. The parent never runs Draco's decoder.
+
+enum Message : uint8_t { kBatch = 1, kTriangles = 2, kInfo = 3, kDone = 4, kError = 5 };
+
+bool writeAll(int fd, const void* p, size_t n) {
+  const char* c = static_cast<const char*>(p);
+  while (n > 0) {
+    const ssize_t w = ::write(fd, c, n);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) return false;
+    c += w;
+    n -= size_t(w);
+  }
+  return true;
+}
+
+bool readAll(int fd, void* p, size_t n) {
+  char* c = static_cast<char*>(p);
+  while (n > 0) {
+    const ssize_t r = ::read(fd, c, n);
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) return false;
+    c += r;
+    n -= size_t(r);
+  }
+  return true;
+}
+
+template <class T>
+bool writeVec(int fd, const std::vector<T>& v) {
+  return v.empty() || writeAll(fd, v.data(), v.size() * sizeof(T));
+}
+
+// The child's sink: serializes batches and triangles onto the pipe.
+class PipeSink : public BatchSink {
+ public:
+  explicit PipeSink(int fd) : fd_(fd) {}
+  Status onPoints(const PointBatch& b) override {
+    const uint8_t kind = kBatch;
+    const uint64_t first = b.firstIndex;
+    const uint32_t n = uint32_t(b.size());
+    const uint8_t flags = uint8_t(b.hasNormals() | b.hasColors() << 1 | b.hasIntensity() << 2 | b.hasConfidence() << 3 |
+                                  b.hasClassification() << 4);
+    bool ok = writeAll(fd_, &kind, 1) && writeAll(fd_, &first, 8) && writeAll(fd_, &n, 4) && writeAll(fd_, &flags, 1) &&
+              writeVec(fd_, b.x) && writeVec(fd_, b.y) && writeVec(fd_, b.z) && writeVec(fd_, b.nx) &&
+              writeVec(fd_, b.ny) && writeVec(fd_, b.nz) && writeVec(fd_, b.r) && writeVec(fd_, b.g) &&
+              writeVec(fd_, b.b) && writeVec(fd_, b.intensity) && writeVec(fd_, b.confidence) &&
+              writeVec(fd_, b.classification);
+    return ok ? Status::ok() : Status::internal("pipe closed");
+  }
+  Status onTriangles(const uint32_t* idx, size_t count) override {
+    const uint8_t kind = kTriangles;
+    const uint32_t n = uint32_t(count);
+    bool ok = writeAll(fd_, &kind, 1) && writeAll(fd_, &n, 4) && writeAll(fd_, idx, size_t(n) * 12);
+    return ok ? Status::ok() : Status::internal("pipe closed");
+  }
+
+ private:
+  int fd_;
+};
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAddressSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
+uint64_t limitFor(uint64_t fileBytes) { return std::max<uint64_t>(uint64_t(2) << 30, 64 * fileBytes); }
+
+[[noreturn]] void childMain(int fd, const std::string& path, bool infoOnly, size_t batchPoints, bool readTriangles) {
+  std::signal(SIGPIPE, SIG_IGN);
+  auto fail = [&](const std::string& msg) {
+    const uint8_t kind = kError;
+    const uint32_t n = uint32_t(msg.size());
+    (void)(writeAll(fd, &kind, 1) && writeAll(fd, &n, 4) && writeAll(fd, msg.data(), n));
+    ::_exit(3);
+  };
+  try {
+    auto size = fileSize(path);
+    // The limit covers what this process already maps plus a budget for the decoder.
+    if (!kAddressSanitizer && size) {
+      long pages = 0;
+      if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+        if (std::fscanf(f, "%ld", &pages) != 1) pages = 0;
+        std::fclose(f);
+      }
+      const uint64_t now = uint64_t(pages) * uint64_t(sysconf(_SC_PAGESIZE));
+      struct rlimit rl;
+      rl.rlim_cur = rl.rlim_max = rlim_t(now + limitFor(*size));
+      setrlimit(RLIMIT_AS, &rl);
+    }
+    auto d = decodeInProcess(path);
+    if (!d) fail(d.status().message());
+    if (infoOnly) {
+      const DracoInfo info = infoOf(*d);
+      const uint8_t kind = kInfo;
+      if (!writeAll(fd, &kind, 1) || !writeAll(fd, &info, sizeof(info))) ::_exit(4);
+    } else {
+      PipeSink sink(fd);
+      Status s = streamDecoded(path, *d, batchPoints, readTriangles, sink);
+      if (!s) fail(s.message());
+    }
+    const uint8_t done = kDone;
+    (void)writeAll(fd, &done, 1);
+    ::_exit(0);
+  } catch (const std::bad_alloc&) {
+    fail(path + ": the Draco decoder needed more than " + std::to_string(limitFor(fileSize(path) ? *fileSize(path) : 0) >> 20) +
+         " MiB for this file (corrupt or hostile stream)");
+  } catch (const std::exception& e) {
+    fail(path + ": the Draco decoder failed: " + e.what());
+  } catch (...) {
+    fail(path + ": the Draco decoder failed");
+  }
+  ::_exit(5);
+}
+
+template <class T>
+bool readVec(int fd, std::vector<T>& v, size_t n) {
+  v.resize(n);
+  return n == 0 || readAll(fd, v.data(), n * sizeof(T));
+}
+
+// Runs the decoder in a child; `info` or `sink` receives what it sends.
+Status decodeIsolated(const std::string& path, DracoInfo* info, size_t batchPoints, bool readTriangles, BatchSink* sink) {
+  int fds[2];
+  if (::pipe(fds) != 0) return Status::internal(path + ": cannot create a pipe for the Draco decoder");
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fds[0]);
+    ::close(fds[1]);
+    return Status::internal(path + ": cannot start the Draco decoder process");
+  }
+  if (pid == 0) {
+    ::close(fds[0]);
+    childMain(fds[1], path, info != nullptr, batchPoints, readTriangles);
+  }
+  ::close(fds[1]);
+  const int fd = fds[0];
+  Status result = Status::ok();
+  bool done = false;
+  PointBatch b;
+  std::vector<uint32_t> tris;
+  while (!done && result.isOk()) {
+    uint8_t kind = 0;
+    if (!readAll(fd, &kind, 1)) break;
+    if (kind == kBatch) {
+      uint32_t n = 0;
+      uint8_t flags = 0;
+      if (!readAll(fd, &b.firstIndex, 8) || !readAll(fd, &n, 4) || !readAll(fd, &flags, 1) || n > (1u << 26)) break;
+      b.clear();
+      const size_t nn = flags & 1 ? n : 0, nc = flags & 2 ? n : 0;
+      if (!readVec(fd, b.x, n) || !readVec(fd, b.y, n) || !readVec(fd, b.z, n) || !readVec(fd, b.nx, nn) ||
+          !readVec(fd, b.ny, nn) || !readVec(fd, b.nz, nn) || !readVec(fd, b.r, nc) || !readVec(fd, b.g, nc) ||
+          !readVec(fd, b.b, nc) || !readVec(fd, b.intensity, flags & 4 ? n : 0) ||
+          !readVec(fd, b.confidence, flags & 8 ? n : 0) || !readVec(fd, b.classification, flags & 16 ? n : 0))
+        break;
+      if (sink) result = sink->onPoints(b);
+    } else if (kind == kTriangles) {
+      uint32_t n = 0;
+      if (!readAll(fd, &n, 4) || n > (1u << 26) || !readVec(fd, tris, size_t(n) * 3)) break;
+      if (sink) result = sink->onTriangles(tris.data(), n);
+    } else if (kind == kInfo) {
+      if (!info || !readAll(fd, info, sizeof(*info))) break;
+    } else if (kind == kError) {
+      uint32_t n = 0;
+      std::string msg;
+      if (readAll(fd, &n, 4) && n < (1u << 16)) {
+        msg.resize(n);
+        if (!readAll(fd, msg.data(), n)) msg.clear();
+      }
+      result = Status::badInput(msg.empty() ? path + ": the Draco decoder failed" : msg);
+    } else if (kind == kDone) {
+      done = true;
+    } else {
+      break;
+    }
+  }
+  ::close(fd);
+  if (!done) ::kill(pid, SIGKILL);  // stopped early (the sink failed): the child may still be writing
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  if (!result.isOk()) return result;
+  if (!done) {
+    if (WIFSIGNALED(status))
+      return Status::badInput(path + ": the Draco decoder crashed on this file (signal " + std::to_string(WTERMSIG(status)) +
+                              "); the file is corrupt or hostile");
+    return Status::badInput(path + ": the Draco decoder stopped on this file (exit " + std::to_string(WEXITSTATUS(status)) +
+                            "); the file is corrupt or hostile");
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<DracoInfo> readDracoInfo(const std::string& path) {
+  DracoInfo info;
+  SA_RETURN_IF_ERROR(decodeIsolated(path, &info, 0, false, nullptr));
+  return info;
+}
+
+Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
+  return decodeIsolated(path, nullptr, std::max<size_t>(1, batchPoints), readTriangles, &sink);
+}
+
+Status readDracoInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
+  auto d = decodeInProcess(path);
+  if (!d) return d.status();
+  return streamDecoded(path, *d, std::max<size_t>(1, batchPoints), readTriangles, sink);
 }
 
 Status DracoWriter::onPoints(const PointBatch& in) {

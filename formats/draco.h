@@ -3,7 +3,8 @@
 // intensity, confidence and classification. Draco stores positions as 32-bit floats: for
 // georeferenced data the writer stores them relative to an origin it records in the file's
 // metadata ("scanatlas_origin", 3 doubles), which the reader adds back. A .drc file is one
-// compressed block: it is read and decoded whole (memory: the file plus the decoded cloud).
+// compressed block: the child reads and decodes it whole (memory there: the file plus the
+// decoded cloud); this process receives it in batches.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -22,7 +23,12 @@ struct DracoInfo {
 
 Result<DracoInfo> readDracoInfo(const std::string& path);
 // Points in Draco's point order; triangles (meshes) by point index when readTriangles.
+// libdraco is not hardened against hostile files (fuzzing found small files that make it
+// allocate gigabytes), so both calls decode in a child process under an address-space limit
+// and receive the points over a pipe; a decoder crash or exhausted limit is a bad-input error.
 Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink);
+// The same without the child process: for the fuzzer, which needs the decoder's coverage.
+Status readDracoInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink);
 
 struct DracoWriteOptions {
   int positionBits = 16;  // quantization of positions; 0 = lossless 32-bit floats

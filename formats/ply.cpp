@@ -66,7 +66,7 @@ inline double decodeBinary(const unsigned char* p, int t, bool swap) {
 }
 
 // Role of a vertex property in our batch.
-enum Role { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kR, kG, kB, kIntensity, kConfidence, kRoleCount };
+enum Role { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kR, kG, kB, kIntensity, kConfidence, kClass, kRoleCount };
 
 int roleOf(const std::string& n) {
   if (n == "x") return kX;
@@ -80,6 +80,7 @@ int roleOf(const std::string& n) {
   if (n == "blue" || n == "b" || n == "diffuse_blue") return kB;
   if (n == "intensity" || n == "scalar_intensity") return kIntensity;
   if (n == "confidence" || n == "scalar_confidence") return kConfidence;
+  if (n == "classification" || n == "scalar_classification") return kClass;
   return kNone;
 }
 
@@ -187,6 +188,7 @@ class PlyParser {
           if (r >= kR && r <= kB && !p.isList) c[r - kR] = true;
           if (r == kIntensity && !p.isList) hdr_.hasIntensity = true;
           if (r == kConfidence && !p.isList) hdr_.hasConfidence = true;
+          if (r == kClass && !p.isList) hdr_.hasClassification = true;
         }
         if (!(pos[0] && pos[1] && pos[2]))
           return Status::badInput(path_ + ": vertex element lacks x, y or z properties");
@@ -298,7 +300,7 @@ class PlyParser {
     }
     PointBatch batch;
     const bool wantN = hdr_.hasNormals, wantC = hdr_.hasColors;
-    const bool wantI = hdr_.hasIntensity, wantK = hdr_.hasConfidence;
+    const bool wantI = hdr_.hasIntensity, wantK = hdr_.hasConfidence, wantL = hdr_.hasClassification;
     std::vector<unsigned char> raw;
     double vals[kRoleCount] = {};
     uint64_t done = 0;
@@ -311,6 +313,7 @@ class PlyParser {
       if (wantC) { batch.r.resize(n); batch.g.resize(n); batch.b.resize(n); }
       if (wantI) batch.intensity.resize(n);
       if (wantK) batch.confidence.resize(n);
+      if (wantL) batch.classification.resize(n);
       if (binary() && fixed) raw.resize(n * recordSize);
       if (binary() && fixed && !in_.read(raw.data(), raw.size()))
         return truncated("vertex " + std::to_string(done) + " of " + std::to_string(e.count));
@@ -345,6 +348,7 @@ class PlyParser {
         }
         if (wantI) batch.intensity[i] = static_cast<float>(vals[kIntensity]);
         if (wantK) batch.confidence[i] = static_cast<float>(vals[kConfidence]);
+        if (wantL) batch.classification[i] = static_cast<uint8_t>(std::clamp(vals[kClass], 0.0, 255.0));
       }
       done += n;
       if (sink_) SA_RETURN_IF_ERROR(sink_->onPoints(batch));

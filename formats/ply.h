@@ -1,6 +1,6 @@
 // Streaming PLY reader: ascii, binary_little_endian and binary_big_endian; any property order
 // and type; normals (nx ny nz) and colours (red green blue / r g b / diffuse_*) when present;
-// `intensity` and `confidence` kept as attributes;
+// `intensity`, `confidence` and `classification` kept as attributes;
 // `face` lists fan-triangulated; `tristrips` decoded (-1 restarts); every other element
 // (range_grid, ...) skipped. Memory is bounded by the batch size, not the file size.
 #pragma once
@@ -35,7 +35,8 @@ struct PlyHeader {
   uint64_t headerBytes = 0;
   uint64_t vertexCount = 0;
   bool hasNormals = false, hasColors = false;
-  bool hasIntensity = false, hasConfidence = false;  // scalar `intensity` / `confidence` properties
+  // scalar `intensity`, `confidence`, `classification` properties
+  bool hasIntensity = false, hasConfidence = false, hasClassification = false;
   bool hasFaces = false;  // a face or tristrips element with entries
 };
 

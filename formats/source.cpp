@@ -31,6 +31,7 @@ Status addPly(const std::string& path, std::vector<InputFile>& out, std::vector<
   f.hasFaces = h->hasFaces;
   f.hasIntensity = h->hasIntensity;
   f.hasConfidence = h->hasConfidence;
+  f.hasClassification = h->hasClassification;
   f.detail = h->format == PlyFormat::kAscii ? "ascii" : h->format == PlyFormat::kBinaryLittle ? "binary_little_endian" : "binary_big_endian";
   for (auto& w : h->warnings) warnings.push_back(w);
   out.push_back(f);

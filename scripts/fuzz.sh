@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (clang + ASan + UBSan) into build-fuzz/ and runs each for
 # SECONDS (default 30) on seed corpora made from real files (../shared/data) and tiny
-# hand-made inputs. Crashes are saved as build-fuzz/crash-*; turn each into a regression test.
+# hand-made inputs. Crashes are saved as build-fuzz/crash-*; turn each into a regression test
+# (fuzz/regressions/<target>/, replayed by formats_test FuzzRegressions.*).
 # Usage: scripts/fuzz.sh [SECONDS]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,7 +14,7 @@ CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWit
   -DCMAKE_CXX_COMPILER_LAUNCHER= -DCMAKE_C_COMPILER_LAUNCHER= >/dev/null
 cmake --build build-fuzz -j"${JOBS:-2}"
 seeds=build-fuzz/seeds
-rm -rf "$seeds"; mkdir -p "$seeds"/{ply,las,text,pack}
+rm -rf "$seeds"; mkdir -p "$seeds"/{ply,las,text,pack,pcd,draco}
 data=../shared/data
 # Seeds: the heads of real files (libFuzzer mutates from there) plus small complete inputs.
 if [ -d "$data" ]; then
@@ -24,7 +25,26 @@ if [ -d "$data" ]; then
   head -c 6000 "$data/lidar/autzen_trim.las" > "$seeds/las/autzen_head.las"
   head -c 6000 "$data/lidar/lone-star.las" > "$seeds/las/lonestar_head.las"
   cp "$data/stanford_bunny/scans/bun.conf" "$seeds/text/bun.conf"
+  head -c 6000 "$data/pcd/table_scene_mug_stereo_textured.pcd" > "$seeds/pcd/mug_head.pcd"
 fi
+# PCD seeds in all three encodings. The binary_compressed one holds a valid LZF block made of
+# literal runs (control byte = run length - 1, then the bytes).
+printf 'VERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n0 0 0 255\n1 nan 2 65280\n' > "$seeds/pcd/a.pcd"
+/usr/bin/python3 - "$seeds/pcd" <<'PY'
+import struct, sys
+d = sys.argv[1]
+hdr = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 2\nHEIGHT 2\nPOINTS 4\nDATA {}\n"
+pts = [(0, 0, 0, 1), (1, 0, 0, 2), (float("nan"), 0, 0, 3), (0, 1, 0.5, 4)]
+body = b"".join(struct.pack("<fffH", *p) for p in pts)
+open(d + "/b.pcd", "wb").write(hdr.format("binary").encode() + body)
+soa = b"".join(struct.pack("<f", p[0]) for p in pts) + b"".join(struct.pack("<f", p[1]) for p in pts) + \
+      b"".join(struct.pack("<f", p[2]) for p in pts) + b"".join(struct.pack("<H", p[3]) for p in pts)
+lzf = b""
+for i in range(0, len(soa), 32):
+    run = soa[i:i + 32]
+    lzf += bytes([len(run) - 1]) + run
+open(d + "/c.pcd", "wb").write(hdr.format("binary_compressed").encode() + struct.pack("<II", len(lzf), len(soa)) + lzf)
+PY
 printf 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n' > "$seeds/ply/tri.ply"
 printf 'ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0\0\0\0\0\0\0\0\0\0\0\200?\0\0\0\0\0\0\0\0' > "$seeds/ply/bin.ply"
 printf '3\n0 0 0 10 1 2 3\n1 0 0 10 1 2 3\n0 1 0 10 1 2 3\n' > "$seeds/text/a.pts"
@@ -32,13 +52,21 @@ printf 'x,y,z,r,g,b\n0,0,0,1,2,3\n1,1,1,4,5,6\n' > "$seeds/text/a.csv"
 if [ -x build/scanatlas ]; then
   printf 'ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 0.1\n' > "$seeds/tiny.ply"
   ./build/scanatlas pack "$seeds/tiny.ply" -o "$seeds/pack/tiny.hfa" -q --force
+  ./build/scanatlas convert "$seeds/tiny.ply" -o "$seeds/draco/tiny.drc" -q
+  ./build/scanatlas convert "$seeds/tiny.ply" -o "$seeds/draco/tiny_lossless.drc" --quantization 0 -q
+  ./build/scanatlas convert "$seeds/ply/tri.ply" -o "$seeds/draco/tri_mesh.drc" -q
   rm -f "$seeds/tiny.ply"
 fi
 status=0
-for t in ply las text pack; do
+for t in ply las text pack pcd draco; do
   mkdir -p build-fuzz/corpus/$t
   echo "== fuzz_$t for ${secs}s" >&2
-  if ! (cd build-fuzz && ./fuzz_$t -max_total_time="$secs" -max_len=16384 -timeout=10 -rss_limit_mb=2048 \
+  extra=()
+  # libdraco allocates gigabytes for some small hostile inputs (production decodes in a child
+  # process under a memory limit, see formats/draco.h): keep fuzzing past those out-of-memory
+  # reports; crashes still stop the run and fail it.
+  [ "$t" = draco ] && extra=(-fork=2 -ignore_ooms=1)
+  if ! (cd build-fuzz && ./fuzz_$t "${extra[@]}" -max_total_time="$secs" -max_len=16384 -timeout=10 -rss_limit_mb=2048 \
         -print_final_stats=1 corpus/$t seeds/$t 2>&1 | tail -n 12); then
     status=1
   fi

@@ -195,3 +195,77 @@ TEST(Cli, KilledPackLeavesNoHalfWrittenPackAndIsCleanedUpNextTime) {
 
 }  // namespace
 }  // namespace sa
+
+namespace sa {
+namespace {
+
+bool anyTemporary(const std::string& dir) {
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().filename().string().find(".tmp-") != std::string::npos) return true;
+  return false;
+}
+
+// convert and info on the real files of every format, mixed inputs in one pack, and the exit
+// codes and cleanup of failed conversions.
+TEST(Cli, ConvertInfoAndMixedPackOnRealFiles) {
+  test::TempDir d;
+  const std::string las = test::sharedData("lidar/autzen_trim.las");
+  const std::string pcd = test::sharedData("pcd/table_scene_mug_stereo_textured.pcd");
+  auto pi = nlohmann::json::parse(run("info " + pcd + " --json").out)["inputs"][0];
+  EXPECT_EQ(pi["points"].get<int>(), 209280);
+  EXPECT_EQ(pi["invalid_entries"].get<int>(), 97920);
+  EXPECT_EQ(pi["attributes"].get<std::string>(), "colors");
+  auto li = nlohmann::json::parse(run("info " + las + " --json").out)["inputs"][0];
+  EXPECT_EQ(li["classes"]["1"].get<int>(), 83893);
+  EXPECT_EQ(li["classes"]["2"].get<int>(), 26107);
+
+  // LAS -> binary PLY keeps doubles and the attributes exactly.
+  CmdResult c = run("convert " + las + " -o " + d.file("a.ply") + " --json");
+  ASSERT_EQ(c.code, 0) << c.out;
+  EXPECT_EQ(nlohmann::json::parse(c.out)["points"].get<int>(), 110000);
+  auto ai = nlohmann::json::parse(run("info " + d.file("a.ply") + " --json").out)["inputs"][0];
+  EXPECT_EQ(ai["attributes"].get<std::string>(), "colors,intensity,classification");
+  EXPECT_EQ(ai["classes"]["2"].get<int>(), 26107);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(ai["bounds_min"][k].get<double>(), li["bounds_min"][k].get<double>());
+    EXPECT_EQ(ai["bounds_max"][k].get<double>(), li["bounds_max"][k].get<double>());
+  }
+  // LAS -> Draco at two quantizations: fewer bits, smaller file.
+  auto q11 = nlohmann::json::parse(run("convert " + las + " -o " + d.file("a11.drc") + " --quantization 11 --json").out);
+  auto q16 = nlohmann::json::parse(run("convert " + las + " -o " + d.file("a16.drc") + " --json").out);
+  EXPECT_TRUE(q16["origin_shifted"].get<bool>());
+  EXPECT_LT(q11["bytes"].get<int>(), q16["bytes"].get<int>());
+  // PCD -> text -> pack; and PCD + Draco + text mixed in one pack.
+  ASSERT_EQ(run("convert " + pcd + " -o " + d.file("m.xyz") + " -q").code, 0);
+  ASSERT_EQ(run("convert " + pcd + " -o " + d.file("m.drc") + " -q").code, 0);
+  CmdResult mix = run("pack " + pcd + " " + d.file("m.drc") + " " + d.file("m.xyz") + " -o " + d.file("mix.hfa") + " --json");
+  ASSERT_EQ(mix.code, 0) << mix.out;
+  EXPECT_EQ(nlohmann::json::parse(mix.out)["points"].get<int>(), 3 * 209280);
+  EXPECT_EQ(run("verify " + d.file("mix.hfa")).code, 0);
+
+  // Failures: exit 2 with no output file and no temporary left behind.
+  EXPECT_EQ(run("convert " + las + " -o " + d.file("x.las")).code, 2);  // no LAS writer
+  EXPECT_EQ(run("convert " + d.file("missing.ply") + " -o " + d.file("x.ply")).code, 2);
+  EXPECT_EQ(run("convert " + test::sharedData("lidar/lone-star.laz") + " -o " + d.file("x.ply")).code, 2);
+  EXPECT_EQ(run("convert " + las + " -o " + d.file("x.drc") + " --quantization 31").code, 2);
+  EXPECT_EQ(run("convert " + d.file("a.ply") + " -o " + d.file("a.ply")).code, 2);
+  EXPECT_EQ(run("convert --help").code, 0);
+  EXPECT_EQ(run("info --help").code, 0);
+  // A PLY whose body ends early: the error comes mid-stream, after output has begun.
+  {
+    std::ifstream in(d.file("a.ply"), std::ios::binary);
+    std::vector<char> all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    all.resize(all.size() - 1000);
+    test::writeBytes(d.file("cut.ply"), all);
+  }
+  EXPECT_EQ(run("convert " + d.file("cut.ply") + " -o " + d.file("cut.xyz")).code, 2);
+  EXPECT_FALSE(std::filesystem::exists(d.file("cut.xyz")));
+  EXPECT_FALSE(anyTemporary(d.path()));
+  // A hostile PCD header through the CLI.
+  test::writeText(d.file("huge.pcd"), "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1000000000\nPOINTS 1000000000\nDATA binary\n");
+  EXPECT_EQ(run("info " + d.file("huge.pcd")).code, 2);
+  EXPECT_EQ(run("pack " + d.file("huge.pcd") + " -o " + d.file("h.hfa")).code, 2);
+}
+
+}  // namespace
+}  // namespace sa

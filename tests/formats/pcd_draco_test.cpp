@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <map>
 
@@ -258,6 +259,69 @@ TEST(Draco, BadFilesGiveClearErrors) {
   ASSERT_FALSE(t.isOk());
   EXPECT_EQ(t.status().kind(), ErrorKind::kBadInput);
   EXPECT_NE(t.status().message().find("t.drc"), std::string::npos) << t.status().message();
+}
+
+// Fuzzing finding (fuzz_draco, out-of-memory): 39 bytes declaring 1090519044 points made
+// Draco allocate about 13 GB before reading a point. Refused from the declared count now.
+TEST(Draco, FuzzFindingHugeDeclaredPointCountRefusedBeforeDecoding) {
+  const unsigned char bytes[] = {0x44, 0x52, 0x41, 0x43, 0x4f, 0x2, 0x3, 0x0, 0x0, 0x0, 0x0, 0x4, 0x0, 0x0, 0x41, 0x1,
+                                 0x1, 0x0, 0x9, 0x1, 0x0, 0x0, 0x0, 0x0, 0x80, 0x3f, 0x0, 0x0, 0x64, 0x0, 0x0, 0x0,
+                                 0x0, 0x0, 0x0, 0x0, 0x0, 0x0, 0x0};
+  test::TempDir d;
+  test::writeBytes(d.file("oom.drc"), std::vector<char>(bytes, bytes + sizeof(bytes)));
+  auto r = readDracoInfo(d.file("oom.drc"));
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(r.status().kind(), ErrorKind::kBadInput);
+  EXPECT_NE(r.status().message().find("declares 1090519044 points in a 39-byte file"), std::string::npos)
+      << r.status().message();
+}
+
+// Fuzzing finding (fuzz_draco, out-of-memory): 29 bytes declaring 117 points, for which
+// libdraco's kd-tree attribute decoder allocates 8 GB. No header check sees it; the decoder
+// runs in a child process under a memory limit and its failure is a clear error here.
+TEST(Draco, FuzzFindingDecoderAllocationIsContainedInTheChild) {
+  const unsigned char bytes[] = {0x44, 0x52, 0x41, 0x43, 0x4f, 0x02, 0x00, 0x00, 0x01, 0x00, 0x00, 0x75, 0x00, 0x00, 0x00, 0x01, 0x01, 0x00, 0x05, 0x01, 0x41, 0x09, 0x01, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f};
+  test::TempDir d;
+  test::writeBytes(d.file("oom2.drc"), std::vector<char>(bytes, bytes + sizeof(bytes)));
+  auto r = readDracoInfo(d.file("oom2.drc"));
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(r.status().kind(), ErrorKind::kBadInput);
+  EXPECT_NE(r.status().message().find("oom2.drc"), std::string::npos) << r.status().message();
+  // Still usable afterwards: a good file decodes in the same process.
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(500, 1.0, Eigen::Vector3d(0, 0, 0), pts, nrm);
+  test::writePointsPly(d.file("s.ply"), pts, &nrm);
+  auto in = InputSet::open({d.file("s.ply")});
+  ASSERT_TRUE(in.isOk());
+  DracoWriter w(DracoWriteOptions{});
+  ASSERT_TRUE(in->stream(w, false).isOk());
+  ASSERT_TRUE(w.write(d.file("s.drc")).isOk());
+  Gather g;
+  ASSERT_TRUE(readDraco(d.file("s.drc"), 100, false, g).isOk());
+  EXPECT_EQ(g.all.size(), 500u);
+  EXPECT_EQ(g.batches, 5u);
+}
+
+// Every input the fuzzers found (fuzz/regressions/<target>/) is refused as bad input, with
+// the file named, in this process (the Draco ones through the child-process decoder).
+TEST(FuzzRegressions, EveryStoredFindingIsABadInputError) {
+  int n = 0;
+  for (const auto& dir : std::filesystem::directory_iterator(std::string(SA_SOURCE_DIR) + "/fuzz/regressions")) {
+    for (const auto& f : std::filesystem::directory_iterator(dir.path())) {
+      ++n;
+      const std::string path = f.path().string();
+      auto in = InputSet::open({path});
+      Status s = in.isOk() ? Status::ok() : in.status();
+      if (in.isOk()) {
+        Gather g;
+        s = in->stream(g, true);
+      }
+      ASSERT_FALSE(s.isOk()) << path;
+      EXPECT_EQ(s.kind(), ErrorKind::kBadInput) << path << ": " << s.message();
+      EXPECT_NE(s.message().find(f.path().filename().string()), std::string::npos) << s.message();
+    }
+  }
+  EXPECT_GE(n, 4);
 }
 
 // The same cloud written by the converters in PLY, XYZ, CSV, PCD (ascii and binary) and
