@@ -14,7 +14,7 @@ int cmdView(int argc, char** argv) {
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::printf(
-        "usage: scanatlas view PACK.hfa | SCAN.ply|SCANS.conf [options]\n"
+        "usage: scanatlas view PACK.hfa | SCAN [options]   (SCAN: any input pack reads)\n"
         "\n"
         "The interactive window: orbit, pan, zoom to cursor, fly, pick and measure, clip box and\n"
         "section plane, shading modes with eye-dome lighting, the cell-box view, bookmarks and\n"

@@ -2,6 +2,8 @@
 // exit codes (0 ok, 2 bad input or usage, 1 internal failure).
 #include <cstdio>
 #include <cstring>
+#include <exception>
+#include <new>
 #include <string>
 
 #include "cli/commands.h"
@@ -73,14 +75,29 @@ int main(int argc, char** argv) {
     return 0;
   }
   const std::string cmd = argv[1];
-  if (cmd == "pack") return sa::cmdPack(argc - 2, argv + 2);
-  if (cmd == "render") return sa::cmdRender(argc - 2, argv + 2);
-  if (cmd == "view") return sa::cmdView(argc - 2, argv + 2);
-  if (cmd == "info") return sa::cmdInfo(argc - 2, argv + 2);
-  if (cmd == "convert") return sa::cmdConvert(argc - 2, argv + 2);
-  if (cmd == "verify") return sa::cmdVerify(argc - 2, argv + 2);
-  if (cmd == "bench") return sa::cmdBench(argc - 2, argv + 2);
-  if (cmd == "eval") return sa::cmdEval(argc - 2, argv + 2);
+  int (*fn)(int, char**) = nullptr;
+  if (cmd == "pack") fn = sa::cmdPack;
+  if (cmd == "render") fn = sa::cmdRender;
+  if (cmd == "view") fn = sa::cmdView;
+  if (cmd == "info") fn = sa::cmdInfo;
+  if (cmd == "convert") fn = sa::cmdConvert;
+  if (cmd == "verify") fn = sa::cmdVerify;
+  if (cmd == "bench") fn = sa::cmdBench;
+  if (cmd == "eval") fn = sa::cmdEval;
+  if (fn) {
+    // Last line of defence: an exception escaping a library is an internal failure with a
+    // message, never an abort. (Outputs are temporaries until committed, so nothing
+    // half-written remains.)
+    try {
+      return fn(argc - 2, argv + 2);
+    } catch (const std::bad_alloc&) {
+      std::fprintf(stderr, "scanatlas: error: %s: out of memory\n", cmd.c_str());
+      return 1;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "scanatlas: error: %s: internal failure: %s\n", cmd.c_str(), e.what());
+      return 1;
+    }
+  }
   std::fprintf(stderr, "scanatlas: unknown command '%s'\n\n%s", cmd.c_str(), kUsage);
   return 2;
 }

@@ -7,8 +7,16 @@
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
+#include <new>
+#include <sstream>
 #include <vector>
+
+#include "common/fileio.h"
+#include "formats/isolate.h"
 
 namespace sa {
 namespace {
@@ -19,8 +27,58 @@ struct Traits : OpenMesh::DefaultTraits {
 };
 using Mesh = OpenMesh::PolyMesh_ArrayKernelT<Traits>;
 
+std::string lowerExt(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (auto& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+// OpenMesh reserves the counts an OFF header declares before reading a vertex (a 60-byte file
+// declaring 2*10^9 vertices aborted with bad_alloc): check them against the file size first.
+// An ascii vertex takes at least 6 bytes ("0 0 0\n") and a face 8 ("3 0 1 2\n"); binary
+// records are larger. Binary STL's triangle count is checked by OpenMesh against the size.
+Status checkOffCounts(const std::string& path) {
+  BufferedReader in;
+  SA_RETURN_IF_ERROR(in.open(path, 1 << 16));
+  std::string line;
+  int lineNo = 0;
+  bool sawKeyword = false;
+  while (in.readLine(line, 1 << 12) && lineNo < 1000) {
+    ++lineNo;
+    const size_t c = line.find('#');
+    if (c != std::string::npos) line.resize(c);
+    std::istringstream ss(line);
+    std::string first;
+    if (!(ss >> first)) continue;
+    if (!sawKeyword && first.find("OFF") != std::string::npos) {
+      sawKeyword = true;
+      if (line.find("BINARY") != std::string::npos) return Status::ok();  // counts follow in binary; OpenMesh checks them
+      if (ss >> first) {}  // counts may follow on the keyword line
+      else continue;
+    }
+    std::istringstream counts(line.substr(line.find(first)));
+    std::string nvText, nfText;
+    counts >> nvText >> nfText;
+    char* end = nullptr;
+    const long double nv = std::strtold(nvText.c_str(), &end);
+    const bool nvOk = !nvText.empty() && *end == 0;
+    const long double nf = std::strtold(nfText.c_str(), &end);
+    const bool nfOk = !nfText.empty() && *end == 0;
+    if (!nvOk || !nfOk || !(nv >= 0) || !(nf >= 0))
+      return Status::badInput(path + ": line " + std::to_string(lineNo) + ": expected the OFF vertex and face counts");
+    const long double need = nv * 6 + nf * 8;
+    if (need > static_cast<long double>(in.fileSize()))
+      return Status::badInput(path + ": OFF header declares " + nvText.substr(0, 24) + " vertices and " +
+                              nfText.substr(0, 24) + " faces but the file has only " + std::to_string(in.fileSize()) +
+                              " bytes (truncated or header corrupt)");
+    return Status::ok();
+  }
+  return Status::ok();
+}
+
 Status load(const std::string& path, Mesh& mesh, OpenMesh::IO::Options& opt) {
   if (!std::filesystem::exists(path)) return Status::badInput(path + ": no such file");
+  if (lowerExt(path) == ".off") SA_RETURN_IF_ERROR(checkOffCounts(path));
   mesh.request_vertex_normals();
   mesh.request_vertex_colors();
   // STL has facet normals only; vertex normals then come from the faces (area-weighted, in the
@@ -29,7 +87,16 @@ Status load(const std::string& path, Mesh& mesh, OpenMesh::IO::Options& opt) {
   opt = stl ? OpenMesh::IO::Options(OpenMesh::IO::Options::Default)
             : OpenMesh::IO::Options(OpenMesh::IO::Options::VertexNormal | OpenMesh::IO::Options::VertexColor);
   std::streambuf* old = std::cerr.rdbuf(nullptr);  // OpenMesh prints its own complaints
-  const bool ok = OpenMesh::IO::read_mesh(mesh, path, opt);
+  bool ok = false;
+  try {
+    ok = OpenMesh::IO::read_mesh(mesh, path, opt);
+  } catch (const std::bad_alloc&) {
+    std::cerr.rdbuf(old);
+    return Status::badInput(path + ": OpenMesh ran out of memory reading this mesh (counts in the file corrupt?)");
+  } catch (const std::exception& e) {
+    std::cerr.rdbuf(old);
+    return Status::badInput(path + ": OpenMesh could not read this mesh: " + e.what());
+  }
   std::cerr.rdbuf(old);
   if (!ok) return Status::badInput(path + ": OpenMesh could not read this mesh (malformed or not OBJ/OFF/STL)");
   if (mesh.n_vertices() == 0) return Status::badInput(path + ": the mesh has no vertices");
@@ -38,7 +105,7 @@ Status load(const std::string& path, Mesh& mesh, OpenMesh::IO::Options& opt) {
 
 }  // namespace
 
-Result<MeshInfo> readMeshInfo(const std::string& path) {
+Result<MeshInfo> readMeshInfoInProcess(const std::string& path) {
   Mesh mesh;
   OpenMesh::IO::Options opt;
   Status s = load(path, mesh, opt);
@@ -51,7 +118,7 @@ Result<MeshInfo> readMeshInfo(const std::string& path) {
   return info;
 }
 
-Status readMesh(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
+Status readMeshInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
   Mesh mesh;
   OpenMesh::IO::Options opt;
   SA_RETURN_IF_ERROR(load(path, mesh, opt));
@@ -97,6 +164,40 @@ Status readMesh(const std::string& path, size_t batchPoints, bool readTriangles,
   }
   if (!tris.empty()) SA_RETURN_IF_ERROR(sink.onTriangles(tris.data(), tris.size() / 3));
   return Status::ok();
+}
+
+namespace {
+// OpenMesh holds the whole mesh with its connectivity: a few hundred bytes per vertex.
+uint64_t meshLimit(const std::string& path) {
+  auto size = fileSize(path);
+  return std::max<uint64_t>(uint64_t(2) << 30, 64 * (size ? *size : 0));
+}
+}  // namespace
+
+Result<MeshInfo> readMeshInfo(const std::string& path) {
+  if (!std::filesystem::exists(path)) return Status::badInput(path + ": no such file");
+  std::string blob;
+  SA_RETURN_IF_ERROR(runIsolated(
+      path, meshLimit(path),
+      [&](BatchSink&, std::string& out) {
+        auto info = readMeshInfoInProcess(path);
+        if (!info) return info.status();
+        out.assign(reinterpret_cast<const char*>(&*info), sizeof(MeshInfo));
+        return Status::ok();
+      },
+      nullptr, &blob));
+  if (blob.size() != sizeof(MeshInfo)) return Status::internal(path + ": the mesh reader sent no description");
+  MeshInfo info;
+  std::memcpy(&info, blob.data(), sizeof(info));
+  return info;
+}
+
+Status readMesh(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
+  if (!std::filesystem::exists(path)) return Status::badInput(path + ": no such file");
+  return runIsolated(
+      path, meshLimit(path),
+      [&](BatchSink& out, std::string&) { return readMeshInProcess(path, batchPoints, readTriangles, out); }, &sink,
+      nullptr);
 }
 
 }  // namespace sa

@@ -271,3 +271,33 @@ TEST(Mesh, SameMeshInPlyObjOffStlPacksTheSame) {
 
 }  // namespace
 }  // namespace sa
+
+namespace sa {
+namespace {
+
+// OpenMesh reserves an OFF header's counts before reading (2*10^9 vertices aborted with
+// bad_alloc); the counts are checked against the file size first. A malformed OBJ that makes
+// OpenMesh abort on an assertion is an error here, because OpenMesh runs in a child process.
+TEST(Mesh, HostileOffCountsAndAbortingObjAreBadInput) {
+  test::TempDir d;
+  test::writeText(d.file("h.off"), "OFF\n2000000000 2000000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  auto h = InputSet::open({d.file("h.off")});
+  ASSERT_FALSE(h.isOk());
+  EXPECT_EQ(h.status().kind(), ErrorKind::kBadInput);
+  EXPECT_NE(h.status().message().find("OFF header declares 2000000000 vertices"), std::string::npos) << h.status().message();
+  // `f` with no vertex indices: OpenMesh 9's OBJ reader asserts (!vhandles.empty()).
+  test::writeText(d.file("a.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf /1\n");
+  auto a = InputSet::open({d.file("a.obj")});
+  ASSERT_FALSE(a.isOk());
+  EXPECT_EQ(a.status().kind(), ErrorKind::kBadInput);
+  EXPECT_NE(a.status().message().find("a.obj"), std::string::npos) << a.status().message();
+  // And a good mesh still reads afterwards, through the same child-process path.
+  test::writeText(d.file("g.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  auto g = InputSet::open({d.file("g.off")});
+  ASSERT_TRUE(g.isOk()) << g.status().message();
+  EXPECT_EQ(g->pointCount(), 3u);
+  EXPECT_TRUE(g->hasTriangles());
+}
+
+}  // namespace
+}  // namespace sa

@@ -1,0 +1,226 @@
+#include "formats/isolate.h"
+
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <new>
+#include <vector>
+
+namespace sa {
+namespace {
+
+enum Message : uint8_t { kBatch = 1, kTriangles = 2, kInfo = 3, kDone = 4, kError = 5 };
+
+bool writeAll(int fd, const void* p, size_t n) {
+  const char* c = static_cast<const char*>(p);
+  while (n > 0) {
+    const ssize_t w = ::write(fd, c, n);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) return false;
+    c += w;
+    n -= size_t(w);
+  }
+  return true;
+}
+
+bool readAll(int fd, void* p, size_t n) {
+  char* c = static_cast<char*>(p);
+  while (n > 0) {
+    const ssize_t r = ::read(fd, c, n);
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) return false;
+    c += r;
+    n -= size_t(r);
+  }
+  return true;
+}
+
+template <class T>
+bool writeVec(int fd, const std::vector<T>& v) {
+  return v.empty() || writeAll(fd, v.data(), v.size() * sizeof(T));
+}
+
+// The child's sink: serializes batches and triangles onto the pipe.
+class PipeSink : public BatchSink {
+ public:
+  explicit PipeSink(int fd) : fd_(fd) {}
+  Status onPoints(const PointBatch& b) override {
+    const uint8_t kind = kBatch;
+    const uint64_t first = b.firstIndex;
+    const uint32_t n = uint32_t(b.size());
+    const uint8_t flags = uint8_t(b.hasNormals() | b.hasColors() << 1 | b.hasIntensity() << 2 | b.hasConfidence() << 3 |
+                                  b.hasClassification() << 4 | !b.scan.empty() << 5);
+    bool ok = writeAll(fd_, &kind, 1) && writeAll(fd_, &first, 8) && writeAll(fd_, &n, 4) && writeAll(fd_, &flags, 1) &&
+              writeVec(fd_, b.x) && writeVec(fd_, b.y) && writeVec(fd_, b.z) && writeVec(fd_, b.nx) &&
+              writeVec(fd_, b.ny) && writeVec(fd_, b.nz) && writeVec(fd_, b.r) && writeVec(fd_, b.g) &&
+              writeVec(fd_, b.b) && writeVec(fd_, b.intensity) && writeVec(fd_, b.confidence) &&
+              writeVec(fd_, b.classification) && writeVec(fd_, b.scan);
+    return ok ? Status::ok() : Status::internal("pipe closed");
+  }
+  Status onTriangles(const uint32_t* idx, size_t count) override {
+    const uint8_t kind = kTriangles;
+    const uint32_t n = uint32_t(count);
+    bool ok = writeAll(fd_, &kind, 1) && writeAll(fd_, &n, 4) && writeAll(fd_, idx, size_t(n) * 12);
+    return ok ? Status::ok() : Status::internal("pipe closed");
+  }
+
+ private:
+  int fd_;
+};
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAddressSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
+template <class T>
+bool readVec(int fd, std::vector<T>& v, size_t n) {
+  v.resize(n);
+  return n == 0 || readAll(fd, v.data(), n * sizeof(T));
+}
+
+[[noreturn]] void childMain(int fd, const std::string& path, uint64_t memLimit,
+                            const std::function<Status(BatchSink&, std::string&)>& produce) {
+  std::signal(SIGPIPE, SIG_IGN);
+  // The libraries print their own complaints (OpenMesh's failed assertions): this process
+  // reports the failure instead.
+  if (!std::getenv("SA_READER_STDERR")) {
+    const int devnull = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+    if (devnull >= 0) ::dup2(devnull, 2);
+  }
+  auto fail = [&](const std::string& msg) {
+    const uint8_t kind = kError;
+    const uint32_t n = uint32_t(msg.size());
+    (void)(writeAll(fd, &kind, 1) && writeAll(fd, &n, 4) && writeAll(fd, msg.data(), n));
+    ::_exit(3);
+  };
+  try {
+    // The limit covers what this process already maps plus the reader's budget.
+    if (!kAddressSanitizer) {
+      long pages = 0;
+      if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+        if (std::fscanf(f, "%ld", &pages) != 1) pages = 0;
+        std::fclose(f);
+      }
+      const uint64_t now = uint64_t(pages) * uint64_t(sysconf(_SC_PAGESIZE));
+      struct rlimit rl;
+      rl.rlim_cur = rl.rlim_max = rlim_t(now + memLimit);
+      setrlimit(RLIMIT_AS, &rl);
+    }
+    PipeSink sink(fd);
+    std::string info;
+    Status s = produce(sink, info);
+    if (!s) fail(s.message());
+    const uint8_t kind = kInfo;
+    const uint32_t n = uint32_t(info.size());
+    if (!writeAll(fd, &kind, 1) || !writeAll(fd, &n, 4) || !writeAll(fd, info.data(), n)) ::_exit(4);
+    const uint8_t done = kDone;
+    (void)writeAll(fd, &done, 1);
+    ::_exit(0);
+  } catch (const std::bad_alloc&) {
+    fail(path + ": reading this file needed more than " + std::to_string(memLimit >> 20) +
+         " MiB (corrupt or hostile file)");
+  } catch (const std::exception& e) {
+    fail(path + ": the reader failed: " + e.what());
+  } catch (...) {
+    fail(path + ": the reader failed");
+  }
+  ::_exit(5);
+}
+
+}  // namespace
+
+Status runIsolated(const std::string& path, uint64_t memLimit,
+                   const std::function<Status(BatchSink& sink, std::string& info)>& produce, BatchSink* sink,
+                   std::string* info) {
+  int fds[2];
+  if (::pipe(fds) != 0) return Status::internal(path + ": cannot create a pipe for the reader process");
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fds[0]);
+    ::close(fds[1]);
+    return Status::internal(path + ": cannot start the reader process");
+  }
+  if (pid == 0) {
+    ::close(fds[0]);
+    childMain(fds[1], path, memLimit, produce);
+  }
+  ::close(fds[1]);
+  const int fd = fds[0];
+  Status result = Status::ok();
+  bool done = false;
+  PointBatch b;
+  std::vector<uint32_t> tris;
+  while (!done && result.isOk()) {
+    uint8_t kind = 0;
+    if (!readAll(fd, &kind, 1)) break;
+    if (kind == kBatch) {
+      uint32_t n = 0;
+      uint8_t flags = 0;
+      if (!readAll(fd, &b.firstIndex, 8) || !readAll(fd, &n, 4) || !readAll(fd, &flags, 1) || n > (1u << 26)) break;
+      b.clear();
+      const size_t nn = flags & 1 ? n : 0, nc = flags & 2 ? n : 0;
+      if (!readVec(fd, b.x, n) || !readVec(fd, b.y, n) || !readVec(fd, b.z, n) || !readVec(fd, b.nx, nn) ||
+          !readVec(fd, b.ny, nn) || !readVec(fd, b.nz, nn) || !readVec(fd, b.r, nc) || !readVec(fd, b.g, nc) ||
+          !readVec(fd, b.b, nc) || !readVec(fd, b.intensity, flags & 4 ? n : 0) ||
+          !readVec(fd, b.confidence, flags & 8 ? n : 0) || !readVec(fd, b.classification, flags & 16 ? n : 0) ||
+          !readVec(fd, b.scan, flags & 32 ? n : 0))
+        break;
+      if (sink) result = sink->onPoints(b);
+    } else if (kind == kTriangles) {
+      uint32_t n = 0;
+      if (!readAll(fd, &n, 4) || n > (1u << 26) || !readVec(fd, tris, size_t(n) * 3)) break;
+      if (sink) result = sink->onTriangles(tris.data(), n);
+    } else if (kind == kInfo) {
+      uint32_t n = 0;
+      std::string blob;
+      if (!readAll(fd, &n, 4) || n > (1u << 20)) break;
+      blob.resize(n);
+      if (n && !readAll(fd, blob.data(), n)) break;
+      if (info) *info = std::move(blob);
+    } else if (kind == kError) {
+      uint32_t n = 0;
+      std::string msg;
+      if (readAll(fd, &n, 4) && n < (1u << 16)) {
+        msg.resize(n);
+        if (!readAll(fd, msg.data(), n)) msg.clear();
+      }
+      result = Status::badInput(msg.empty() ? path + ": the reader failed" : msg);
+    } else if (kind == kDone) {
+      done = true;
+    } else {
+      break;
+    }
+  }
+  ::close(fd);
+  if (!done) ::kill(pid, SIGKILL);  // stopped early: the child may still be writing
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  if (!result.isOk()) return result;
+  if (!done) {
+    if (WIFSIGNALED(status))
+      return Status::badInput(path + ": the reader crashed on this file (signal " + std::to_string(WTERMSIG(status)) +
+                              "); the file is corrupt or hostile");
+    return Status::badInput(path + ": the reader stopped on this file (exit " + std::to_string(WEXITSTATUS(status)) +
+                            "); the file is corrupt or hostile");
+  }
+  return Status::ok();
+}
+
+}  // namespace sa
