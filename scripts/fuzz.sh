@@ -3,7 +3,7 @@
 # SECONDS (default 30) on seed corpora made from real files (../shared/data) and tiny
 # hand-made inputs. Crashes are saved as build-fuzz/crash-*; turn each into a regression test
 # (fuzz/regressions/<target>/, replayed by formats_test FuzzRegressions.*).
-# Usage: scripts/fuzz.sh [SECONDS]
+# Usage: scripts/fuzz.sh [SECONDS]     (TARGETS="pcd draco" limits the targets)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-30}
@@ -62,7 +62,7 @@ if [ -x build/scanatlas ]; then
   rm -f "$seeds/tiny.ply"
 fi
 status=0
-for t in ply las text pack pcd draco mesh; do
+for t in ${TARGETS:-ply las text pack pcd draco mesh}; do
   mkdir -p build-fuzz/corpus/$t
   echo "== fuzz_$t for ${secs}s" >&2
   extra=()
