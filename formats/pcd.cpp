@@ -15,6 +15,7 @@
 
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/console/print.h>
+#include <pcl/io/lzf.h>
 #include <pcl/io/pcd_io.h>
 
 #include "common/fileio.h"
@@ -356,16 +357,35 @@ Status readPcd(const std::string& path, size_t batchPoints, BatchSink& sink, uin
   if (!fileBytes) return fileBytes.status();
 
   if (h.encoding == PcdEncoding::kBinaryCompressed) {
-    // One LZF block: PCL decompresses all of it (validated above, so its size assumptions hold).
-    pcl::PCLPointCloud2 cloud;
-    Eigen::Vector4f origin;
-    Eigen::Quaternionf orientation;
-    int version = 0;
-    if (reader.read(path, cloud, origin, orientation, version) < 0 || cloud.data.size() != uint64_t(h.points) * h.pointStep)
-      return Status::badInput(path + ": PCL could not decompress the binary_compressed body (LZF data corrupt)");
+    // One LZF block holding each field's values for all points, field after field. PCL's
+    // decompressor inflates it; the header PCL never parses (its parser reads some headers
+    // differently from this one and crashed on a fuzzed file that passed the checks above).
+    Mapping map;
+    SA_RETURN_IF_ERROR(map.open(path, *fileBytes));
+    uint32_t sizes[2];
+    std::memcpy(sizes, map.data() + h.dataOffset, 8);
+    const uint64_t total = uint64_t(h.points) * h.pointStep;  // equals sizes[1], checked with the header
+    std::vector<uint8_t> soa(total);
+    if (total > 0 &&
+        pcl::lzfDecompress(map.data() + h.dataOffset + 8, sizes[0], soa.data(), static_cast<unsigned int>(total)) != total)
+      return Status::badInput(path + ": the binary_compressed block at byte " + std::to_string(h.dataOffset + 8) +
+                              " does not decompress to " + std::to_string(total) + " bytes (LZF data corrupt)");
+    std::vector<uint64_t> fieldStart;
+    uint64_t at = 0;
+    for (const auto& f : h.fields) {
+      fieldStart.push_back(at);
+      at += uint64_t(f.size) * f.count * h.points;
+    }
+    std::vector<uint8_t> aos;
     for (uint64_t done = 0; done < h.points; done += batchPoints) {
       const size_t n = size_t(std::min<uint64_t>(batchPoints, h.points - done));
-      SA_RETURN_IF_ERROR(conv.convert(cloud.data.data() + done * h.pointStep, n, done, h.pointStep));
+      aos.resize(n * h.pointStep);
+      for (size_t k = 0; k < h.fields.size(); ++k) {
+        const size_t bytes = size_t(h.fields[k].size) * h.fields[k].count;
+        const uint8_t* src = soa.data() + fieldStart[k] + done * bytes;
+        for (size_t i = 0; i < n; ++i) std::memcpy(aos.data() + i * h.pointStep + h.fields[k].offset, src + i * bytes, bytes);
+      }
+      SA_RETURN_IF_ERROR(conv.convert(aos.data(), n, done, h.pointStep));
     }
   } else if (h.encoding == PcdEncoding::kBinary) {
     Mapping map;

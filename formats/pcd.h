@@ -2,9 +2,11 @@
 // pcl::PCDReader. The header is validated here first, because PCL allocates POINTS x point
 // size on reading the header and trusts the sizes it finds: a hostile header must be refused
 // before PCL sees it. ascii and binary bodies stream in batches (PCL's readBodyASCII /
-// readBodyBinary on one batch at a time); binary_compressed is one LZF block, which PCL
-// decompresses whole (memory: about twice the decompressed cloud). Entries whose x, y or z is
+// readBodyBinary on one batch at a time); binary_compressed is one LZF block, which
+// pcl::lzfDecompress inflates whole (memory: the decompressed cloud, then batches). Entries whose x, y or z is
 // NaN (the invalid pixels of organized clouds) are skipped and counted, not reported as errors.
+// PCL never parses the header: ascii and binary bodies go through its body readers with a
+// cloud description built here, and binary_compressed through its LZF decompressor.
 #pragma once
 #include <cstdint>
 #include <string>
