@@ -75,7 +75,9 @@ for t in ${TARGETS:-ply las text pack pcd draco mesh}; do
   [ "$t" = mesh ] && extra=(-fork=2 -ignore_ooms=1 -ignore_crashes=1)
   if ! (cd build-fuzz && ./fuzz_$t "${extra[@]}" -max_total_time="$secs" -max_len=16384 -timeout=10 -rss_limit_mb=2048 \
         -print_final_stats=1 corpus/$t seeds/$t 2>&1 | tail -n 12); then
-    status=1
+    # draco and mesh: the libraries' own crashes are expected (fork mode goes on past them and
+    # exits non-zero); the artifact replay below decides.
+    if [ "$t" != draco ] && [ "$t" != mesh ]; then status=1; fi
   fi
 done
 # Artifacts of the targets that fuzz third-party readers in process must all be clean
