@@ -45,12 +45,6 @@ const char* kHelp =
     "  -q, --quiet            no progress or summary on stderr\n"
     "exit codes: 0 ok, 2 bad input or usage, 1 internal failure\n";
 
-std::string lowerExtension(const std::string& path) {
-  std::string e = std::filesystem::path(path).extension().string();
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
-  return e;
-}
-
 // Drops points without finite coordinates (or stops with --strict), reports progress.
 class Filter : public BatchSink {
  public:

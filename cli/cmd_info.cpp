@@ -8,6 +8,7 @@
 #include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "common/fileio.h"
 #include "formats/source.h"
 
 namespace sa {
@@ -140,12 +141,7 @@ int cmdInfo(int argc, char** argv) {
   }
   if (!s) return reportError(s);
   if (a.positionals().empty()) return reportError(Status::badInput("info: give a pack or input files (see --help)"));
-  auto isPack = [](const std::string& p) {
-    std::string e = std::filesystem::path(p).extension().string();
-    std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
-    return e == ".hfa";
-  };
-  if (!isPack(a.positionals()[0])) return infoInputs(a.positionals(), a.get("columns"), a.flag("json"));
+  if (lowerExtension(a.positionals()[0]) != ".hfa") return infoInputs(a.positionals(), a.get("columns"), a.flag("json"));
   if (a.positionals().size() != 1) return reportError(Status::badInput("info: give exactly one pack (see --help)"));
   PackReader pack;
   s = pack.open(a.positionals()[0]);

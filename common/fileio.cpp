@@ -187,4 +187,10 @@ Result<uint64_t> fileSize(const std::string& path) {
   return static_cast<uint64_t>(st.st_size);
 }
 
+std::string lowerExtension(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (auto& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
 }  // namespace sa

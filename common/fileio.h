@@ -87,6 +87,8 @@ class ScratchDir {
 size_t removeStaleTemporaries(const std::string& dir, const std::string& prefix);
 
 std::string directoryOf(const std::string& path);
+// The extension with its dot, lower-cased (".ply" for "Scan.PLY"); empty when there is none.
+std::string lowerExtension(const std::string& path);
 std::string joinPath(const std::string& dir, const std::string& name);
 Status writeFileAtomic(const std::string& path, const void* data, size_t n);
 Result<uint64_t> fileSize(const std::string& path);

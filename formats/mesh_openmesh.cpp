@@ -27,12 +27,6 @@ struct Traits : OpenMesh::DefaultTraits {
 };
 using Mesh = OpenMesh::PolyMesh_ArrayKernelT<Traits>;
 
-std::string lowerExt(const std::string& path) {
-  std::string e = std::filesystem::path(path).extension().string();
-  for (auto& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
-
 // OpenMesh reserves the counts an OFF header declares before reading a vertex (a 60-byte file
 // declaring 2*10^9 vertices aborted with bad_alloc): check them against the file size first.
 // An ascii vertex takes at least 6 bytes ("0 0 0\n") and a face 8 ("3 0 1 2\n"); binary
@@ -78,12 +72,12 @@ Status checkOffCounts(const std::string& path) {
 
 Status load(const std::string& path, Mesh& mesh, OpenMesh::IO::Options& opt) {
   if (!std::filesystem::exists(path)) return Status::badInput(path + ": no such file");
-  if (lowerExt(path) == ".off") SA_RETURN_IF_ERROR(checkOffCounts(path));
+  if (lowerExtension(path) == ".off") SA_RETURN_IF_ERROR(checkOffCounts(path));
   mesh.request_vertex_normals();
   mesh.request_vertex_colors();
   // STL has facet normals only; vertex normals then come from the faces (area-weighted, in the
   // pipeline), not from whichever facet OpenMesh copied last.
-  const bool stl = std::filesystem::path(path).extension() == ".stl" || std::filesystem::path(path).extension() == ".STL";
+  const bool stl = lowerExtension(path) == ".stl";
   opt = stl ? OpenMesh::IO::Options(OpenMesh::IO::Options::Default)
             : OpenMesh::IO::Options(OpenMesh::IO::Options::VertexNormal | OpenMesh::IO::Options::VertexColor);
   std::streambuf* old = std::cerr.rdbuf(nullptr);  // OpenMesh prints its own complaints

@@ -285,6 +285,7 @@ Result<PcdHeader> readPcdHeader(const std::string& path) {
     }
   }
   h.dataOffset = in.offset();
+  h.headerLines = uint64_t(lineNo);
   if (h.fields.empty()) return Status::badInput(path + ": the header has no FIELDS line");
   if (!haveSize || !haveType) return Status::badInput(path + ": the header lacks a SIZE or TYPE line");
   for (const auto& f : h.fields)
@@ -410,13 +411,7 @@ Status readPcd(const std::string& path, size_t batchPoints, BatchSink& sink, uin
     fs.seekg(std::streamoff(h.dataOffset));
     uint64_t elems = 0;
     for (const auto& f : h.fields) elems += f.count;
-    // Line number of the first data line: count the header's lines.
-    uint64_t lineNo = 0;
-    {
-      std::ifstream hs(path, std::ios::binary);
-      std::string l;
-      while (uint64_t(hs.tellg()) < h.dataOffset && std::getline(hs, l)) ++lineNo;
-    }
+    uint64_t lineNo = h.headerLines;
     pcl::PCLPointCloud2 cloud = emptyCloud(h);
     std::string line, text;
     uint64_t done = 0;

@@ -31,6 +31,7 @@ struct PcdHeader {
   uint64_t width = 0, height = 0, points = 0;
   uint32_t pointStep = 0;
   uint64_t dataOffset = 0;  // first byte after the DATA line
+  uint64_t headerLines = 0; // lines up to and including DATA (ascii errors count from here)
   PcdEncoding encoding = PcdEncoding::kAscii;
   bool hasNormals = false, hasColors = false, hasIntensity = false;
   bool organized() const { return height > 1; }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "common/fileio.h"
 #include "formats/conf.h"
 #include "formats/draco.h"
 #include "formats/pcd.h"
@@ -13,12 +14,6 @@
 
 namespace sa {
 namespace {
-
-std::string lowerExtension(const std::string& path) {
-  std::string e = std::filesystem::path(path).extension().string();
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
-  return e;
-}
 
 Status addPly(const std::string& path, std::vector<InputFile>& out, std::vector<std::string>& warnings) {
   Result<PlyHeader> h = readPlyHeader(path);
