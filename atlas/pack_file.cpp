@@ -171,8 +171,8 @@ Status PackReader::open(const std::string& path) {
     return Status::badInput(path + ": file is " + std::to_string(size_) + " bytes but its header says " +
                             std::to_string(header_->fileSize) + " (truncated or appended to)");
   if (header_->sectionCount == 0 || header_->sectionCount > 64 ||
-      header_->sectionTableOffset < sizeof(PackHeader) ||
-      header_->sectionTableOffset + uint64_t(header_->sectionCount) * sizeof(SectionEntry) > size_)
+      header_->sectionTableOffset < sizeof(PackHeader) || header_->sectionTableOffset > size_ ||
+      uint64_t(header_->sectionCount) * sizeof(SectionEntry) > size_ - header_->sectionTableOffset)
     return Status::badInput(path + ": corrupt section table");
   sections_ = reinterpret_cast<const SectionEntry*>(base_ + header_->sectionTableOffset);
   if (crcOf(reinterpret_cast<const uint8_t*>(sections_), header_->sectionCount * sizeof(SectionEntry)) !=
@@ -200,7 +200,8 @@ Status PackReader::open(const std::string& path) {
   if (P == 0 || P > 65536 || (P & (P - 1)))
     return Status::badInput(path + ": page size " + std::to_string(P) + " is not a power of two <= 65536");
   const uint64_t pageTexels = uint64_t(P) * P;
-  if (hght->size != pageTexels * meta_->pageCount * 2)
+  // pageTexels * pageCount * 4 can pass 2^64 for hostile headers; bound the count by the file first.
+  if (meta_->pageCount > size_ / (pageTexels * 2) || hght->size != pageTexels * meta_->pageCount * 2)
     return Status::badInput(path + ": HGHT section size does not match page size and count");
   hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
   if (meta_->flags & kPackHasColor) {

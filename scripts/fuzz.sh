@@ -66,6 +66,8 @@ for t in ${TARGETS:-ply las text pack pcd draco mesh}; do
   mkdir -p build-fuzz/corpus/$t
   echo "== fuzz_$t for ${secs}s" >&2
   extra=()
+  # Stored findings run first on every fuzz run, so a regression fails here too.
+  regress=(); [ -d "fuzz/regressions/$t" ] && regress=("../fuzz/regressions/$t")
   # libdraco allocates gigabytes for some small hostile inputs (production decodes in a child
   # process under a memory limit, see formats/draco.h): keep fuzzing past those out-of-memory
   # reports; crashes still stop the run and fail it.
@@ -74,7 +76,7 @@ for t in ${TARGETS:-ply las text pack pcd draco mesh}; do
   # meshes in a child process): keep going, then replay every artifact below.
   [ "$t" = mesh ] && extra=(-fork=2 -ignore_ooms=1 -ignore_crashes=1)
   if ! (cd build-fuzz && ./fuzz_$t "${extra[@]}" -max_total_time="$secs" -max_len=16384 -timeout=10 -rss_limit_mb=2048 \
-        -print_final_stats=1 corpus/$t seeds/$t 2>&1 | tail -n 12); then
+        -print_final_stats=1 corpus/$t seeds/$t "${regress[@]}" 2>&1 | tail -n 12); then
     # draco and mesh: the libraries' own crashes are expected (fork mode goes on past them and
     # exits non-zero); the artifact replay below decides.
     if [ "$t" != draco ] && [ "$t" != mesh ]; then status=1; fi

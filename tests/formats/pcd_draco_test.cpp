@@ -307,6 +307,7 @@ TEST(Draco, FuzzFindingDecoderAllocationIsContainedInTheChild) {
 TEST(FuzzRegressions, EveryStoredFindingIsABadInputError) {
   int n = 0;
   for (const auto& dir : std::filesystem::directory_iterator(std::string(SA_SOURCE_DIR) + "/fuzz/regressions")) {
+    if (dir.path().filename() == "pack") continue;  // pack reader findings: pack_test
     for (const auto& f : std::filesystem::directory_iterator(dir.path())) {
       ++n;
       const std::string path = f.path().string();
