@@ -16,8 +16,13 @@ namespace sa {
 // small blob to send back. `sink` (here) receives the batches and triangles; `info` the blob.
 // memLimit: bytes of address space the child may add to what it inherits (ignored under
 // AddressSanitizer, which reserves terabytes of shadow memory).
+// The child also runs under a CPU-time limit (readerCpuLimitSeconds), so a file that makes a
+// library loop becomes a bad-input error instead of a hung `pack`.
 Status runIsolated(const std::string& path, uint64_t memLimit,
                    const std::function<Status(BatchSink& sink, std::string& info)>& produce, BatchSink* sink,
                    std::string* info);
+
+// CPU seconds the reader child may use on `path`: 120 + 4 per MiB of file, or SA_READER_CPU_S.
+uint64_t readerCpuLimitSeconds(const std::string& path);
 
 }  // namespace sa

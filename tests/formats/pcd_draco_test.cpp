@@ -10,6 +10,7 @@
 
 #include "../common/test_util.h"
 #include "formats/draco.h"
+#include "formats/isolate.h"
 #include "formats/pcd.h"
 #include "formats/source.h"
 #include "formats/writers.h"
@@ -323,6 +324,30 @@ TEST(FuzzRegressions, EveryStoredFindingIsABadInputError) {
     }
   }
   EXPECT_GE(n, 4);
+}
+
+// A reader that loops (as a hostile file could make libdraco or OpenMesh do) is stopped by the
+// child's CPU-time limit and reported as bad input naming the file, instead of hanging pack.
+TEST(Isolate, LoopingReaderIsStoppedByTheCpuLimit) {
+  test::TempDir d;
+  test::writeBytes(d.file("loop.obj"), std::vector<char>(100, 'v'));
+  ::setenv("SA_READER_CPU_S", "1", 1);
+  EXPECT_EQ(readerCpuLimitSeconds(d.file("loop.obj")), 1u);
+  Status s = runIsolated(
+      d.file("loop.obj"), 1ull << 30,
+      [](BatchSink&, std::string&) {
+        volatile uint64_t x = 0;
+        for (;;) x = x + 1;
+        return Status::ok();
+      },
+      nullptr, nullptr);
+  ::unsetenv("SA_READER_CPU_S");
+  ASSERT_FALSE(s.isOk());
+  EXPECT_EQ(s.kind(), ErrorKind::kBadInput);
+  EXPECT_NE(s.message().find("loop.obj"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("s of CPU time"), std::string::npos) << s.message();
+  // Without the override: 2 minutes plus 4 s per MiB.
+  EXPECT_EQ(readerCpuLimitSeconds(d.file("loop.obj")), 120u);
 }
 
 // The same cloud written by the converters in PLY, XYZ, CSV, PCD (ascii and binary) and
