@@ -253,17 +253,26 @@ Result<DracoInfo> readDracoInfo(const std::string& path) {
   return info;
 }
 
-Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
+Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink,
+                 DracoInfo* info) {
   auto size = fileSize(path);
   if (!size) return size.status();
-  return runIsolated(
+  std::string blob;
+  SA_RETURN_IF_ERROR(runIsolated(
       path, limitFor(*size),
-      [&](BatchSink& out, std::string&) {
+      [&](BatchSink& out, std::string& infoOut) {
         auto d = decodeInProcess(path);
         if (!d) return d.status();
+        const DracoInfo di = infoOf(*d);
+        infoOut.assign(reinterpret_cast<const char*>(&di), sizeof(di));
         return streamDecoded(path, *d, std::max<size_t>(1, batchPoints), readTriangles, out);
       },
-      &sink, nullptr);
+      &sink, &blob));
+  if (info) {
+    if (blob.size() != sizeof(DracoInfo)) return Status::internal(path + ": the Draco reader sent no description");
+    std::memcpy(info, blob.data(), sizeof(DracoInfo));
+  }
+  return Status::ok();
 }
 
 Status readDracoInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {

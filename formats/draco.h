@@ -26,7 +26,9 @@ Result<DracoInfo> readDracoInfo(const std::string& path);
 // libdraco is not hardened against hostile files (fuzzing found small files that make it
 // allocate gigabytes), so both calls decode in a child process under an address-space limit
 // and receive the points over a pipe; a decoder crash or exhausted limit is a bad-input error.
-Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink);
+// `info`, when given, receives the description readDracoInfo gives, from the same decode.
+Status readDraco(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink,
+                 DracoInfo* info = nullptr);
 // The same without the child process: for the fuzzer, which needs the decoder's coverage.
 Status readDracoInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink);
 

@@ -3,6 +3,7 @@
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/statfs.h>
 #include <sys/wait.h>
 #include <fcntl.h>
 #include <unistd.h>
@@ -11,6 +12,8 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <filesystem>
 #include <new>
 #include <vector>
 
@@ -111,6 +114,58 @@ uint64_t readerCpuLimitSeconds(const std::string& path) {
 
 namespace {
 
+// Reads the messages a PipeSink wrote (from the child's pipe or a recording) into `sink`.
+// `done` tells whether the end marker came; a sink error or the reader's error message is
+// returned; a broken stream just stops (done stays false).
+Status readMessages(const std::string& path, int fd, BatchSink* sink, std::string* info, bool triangles, bool& done) {
+  Status result = Status::ok();
+  done = false;
+  PointBatch b;
+  std::vector<uint32_t> tris;
+  while (!done && result.isOk()) {
+    uint8_t kind = 0;
+    if (!readAll(fd, &kind, 1)) break;
+    if (kind == kBatch) {
+      uint32_t n = 0;
+      uint8_t flags = 0;
+      if (!readAll(fd, &b.firstIndex, 8) || !readAll(fd, &n, 4) || !readAll(fd, &flags, 1) || n > (1u << 26)) break;
+      b.clear();
+      const size_t nn = flags & 1 ? n : 0, nc = flags & 2 ? n : 0;
+      if (!readVec(fd, b.x, n) || !readVec(fd, b.y, n) || !readVec(fd, b.z, n) || !readVec(fd, b.nx, nn) ||
+          !readVec(fd, b.ny, nn) || !readVec(fd, b.nz, nn) || !readVec(fd, b.r, nc) || !readVec(fd, b.g, nc) ||
+          !readVec(fd, b.b, nc) || !readVec(fd, b.intensity, flags & 4 ? n : 0) ||
+          !readVec(fd, b.confidence, flags & 8 ? n : 0) || !readVec(fd, b.classification, flags & 16 ? n : 0) ||
+          !readVec(fd, b.scan, flags & 32 ? n : 0))
+        break;
+      if (sink) result = sink->onPoints(b);
+    } else if (kind == kTriangles) {
+      uint32_t n = 0;
+      if (!readAll(fd, &n, 4) || n > (1u << 26) || !readVec(fd, tris, size_t(n) * 3)) break;
+      if (sink && triangles) result = sink->onTriangles(tris.data(), n);
+    } else if (kind == kInfo) {
+      uint32_t n = 0;
+      std::string blob;
+      if (!readAll(fd, &n, 4) || n > (1u << 20)) break;
+      blob.resize(n);
+      if (n && !readAll(fd, blob.data(), n)) break;
+      if (info) *info = std::move(blob);
+    } else if (kind == kError) {
+      uint32_t n = 0;
+      std::string msg;
+      if (readAll(fd, &n, 4) && n < (1u << 16)) {
+        msg.resize(n);
+        if (!readAll(fd, msg.data(), n)) msg.clear();
+      }
+      result = Status::badInput(msg.empty() ? path + ": the reader failed" : msg);
+    } else if (kind == kDone) {
+      done = true;
+    } else {
+      break;
+    }
+  }
+  return result;
+}
+
 [[noreturn]] void childMain(int fd, const std::string& path, uint64_t memLimit,
                             const std::function<Status(BatchSink&, std::string&)>& produce) {
   std::signal(SIGPIPE, SIG_IGN);
@@ -188,51 +243,8 @@ Status runIsolated(const std::string& path, uint64_t memLimit,
   }
   ::close(fds[1]);
   const int fd = fds[0];
-  Status result = Status::ok();
   bool done = false;
-  PointBatch b;
-  std::vector<uint32_t> tris;
-  while (!done && result.isOk()) {
-    uint8_t kind = 0;
-    if (!readAll(fd, &kind, 1)) break;
-    if (kind == kBatch) {
-      uint32_t n = 0;
-      uint8_t flags = 0;
-      if (!readAll(fd, &b.firstIndex, 8) || !readAll(fd, &n, 4) || !readAll(fd, &flags, 1) || n > (1u << 26)) break;
-      b.clear();
-      const size_t nn = flags & 1 ? n : 0, nc = flags & 2 ? n : 0;
-      if (!readVec(fd, b.x, n) || !readVec(fd, b.y, n) || !readVec(fd, b.z, n) || !readVec(fd, b.nx, nn) ||
-          !readVec(fd, b.ny, nn) || !readVec(fd, b.nz, nn) || !readVec(fd, b.r, nc) || !readVec(fd, b.g, nc) ||
-          !readVec(fd, b.b, nc) || !readVec(fd, b.intensity, flags & 4 ? n : 0) ||
-          !readVec(fd, b.confidence, flags & 8 ? n : 0) || !readVec(fd, b.classification, flags & 16 ? n : 0) ||
-          !readVec(fd, b.scan, flags & 32 ? n : 0))
-        break;
-      if (sink) result = sink->onPoints(b);
-    } else if (kind == kTriangles) {
-      uint32_t n = 0;
-      if (!readAll(fd, &n, 4) || n > (1u << 26) || !readVec(fd, tris, size_t(n) * 3)) break;
-      if (sink) result = sink->onTriangles(tris.data(), n);
-    } else if (kind == kInfo) {
-      uint32_t n = 0;
-      std::string blob;
-      if (!readAll(fd, &n, 4) || n > (1u << 20)) break;
-      blob.resize(n);
-      if (n && !readAll(fd, blob.data(), n)) break;
-      if (info) *info = std::move(blob);
-    } else if (kind == kError) {
-      uint32_t n = 0;
-      std::string msg;
-      if (readAll(fd, &n, 4) && n < (1u << 16)) {
-        msg.resize(n);
-        if (!readAll(fd, msg.data(), n)) msg.clear();
-      }
-      result = Status::badInput(msg.empty() ? path + ": the reader failed" : msg);
-    } else if (kind == kDone) {
-      done = true;
-    } else {
-      break;
-    }
-  }
+  Status result = readMessages(path, fd, sink, info, true, done);
   ::close(fd);
   if (!done) ::kill(pid, SIGKILL);  // stopped early: the child may still be writing
   int status = 0;
@@ -254,6 +266,111 @@ Status runIsolated(const std::string& path, uint64_t memLimit,
                             "); the file is corrupt or hostile");
   }
   return Status::ok();
+}
+
+namespace {
+constexpr long kTmpfsMagic = 0x01021994;
+
+std::string tempDir() {
+  std::error_code ec;
+  auto d = std::filesystem::temp_directory_path(ec);
+  return ec ? std::string("/tmp") : d.string();
+}
+}  // namespace
+
+uint64_t StreamRecording::capBytes() {
+  if (const char* e = std::getenv("SA_RECORDING_MAX_MB")) {
+    char* end = nullptr;
+    const unsigned long long v = std::strtoull(e, &end, 10);
+    if (end != e && *end == 0) return uint64_t(v) << 20;
+  }
+  struct statfs fs;
+  if (::statfs(tempDir().c_str(), &fs) == 0 && long(fs.f_type) == kTmpfsMagic) return uint64_t(512) << 20;
+  return uint64_t(4) << 30;
+}
+
+StreamRecording::StreamRecording(size_t batchPoints) : batchPoints_(batchPoints), cap_(capBytes()) {
+  if (cap_ == 0) return;
+  const std::string dir = tempDir();
+  fd_ = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+  if (fd_ < 0) {  // filesystems without O_TMPFILE: create, then unlink at once
+    std::string tmpl = dir + "/scanatlas-recording-XXXXXX";
+    fd_ = ::mkostemp(tmpl.data(), O_CLOEXEC);
+    if (fd_ >= 0) ::unlink(tmpl.c_str());
+  }
+  ok_ = fd_ >= 0;
+}
+
+StreamRecording::~StreamRecording() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void StreamRecording::write(const void* p, size_t n) {
+  if (!ok_) return;
+  if (bytes_ + n > cap_ || !writeAll(fd_, p, n)) {
+    ok_ = false;  // give the disk space back; later passes decode again
+    if (::ftruncate(fd_, 0) != 0) {
+    }
+    return;
+  }
+  bytes_ += n;
+}
+
+Status StreamRecording::onPoints(const PointBatch& b) {
+  points_ += b.size();
+  normals_ = normals_ || b.hasNormals();
+  colors_ = colors_ || b.hasColors();
+  if (!ok_) return Status::ok();
+  // The same encoding as the child's pipe (PipeSink), into memory first: one write per batch.
+  std::string buf;
+  const uint8_t kind = kBatch;
+  const uint64_t first = b.firstIndex;
+  const uint32_t n = uint32_t(b.size());
+  const uint8_t flags = uint8_t(b.hasNormals() | b.hasColors() << 1 | b.hasIntensity() << 2 | b.hasConfidence() << 3 |
+                                b.hasClassification() << 4 | !b.scan.empty() << 5);
+  auto put = [&](const void* p, size_t k) { buf.append(static_cast<const char*>(p), k); };
+  auto putVec = [&](const auto& v) { put(v.data(), v.size() * sizeof(v[0])); };
+  put(&kind, 1);
+  put(&first, 8);
+  put(&n, 4);
+  put(&flags, 1);
+  putVec(b.x); putVec(b.y); putVec(b.z); putVec(b.nx); putVec(b.ny); putVec(b.nz);
+  putVec(b.r); putVec(b.g); putVec(b.b);
+  putVec(b.intensity); putVec(b.confidence); putVec(b.classification); putVec(b.scan);
+  write(buf.data(), buf.size());
+  return Status::ok();
+}
+
+Status StreamRecording::onTriangles(const uint32_t* idx, size_t count) {
+  triangles_ += count;
+  const uint8_t kind = kTriangles;
+  const uint32_t n = uint32_t(count);
+  write(&kind, 1);
+  write(&n, 4);
+  write(idx, size_t(n) * 12);
+  return Status::ok();
+}
+
+void StreamRecording::finish() {
+  const uint8_t done = kDone;
+  write(&done, 1);
+  finished_ = ok_;
+}
+
+bool StreamRecording::replayable(size_t batchPoints) const {
+  return finished_ && ok_ && batchPoints == batchPoints_;
+}
+
+Status StreamRecording::replay(BatchSink& sink, bool triangles) const {
+  // A descriptor of its own (its own file offset), so replays never disturb each other.
+  const std::string self = "/proc/self/fd/" + std::to_string(fd_);
+  const int fd = ::open(self.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return Status::internal("cannot reopen the decoded-input recording: " + std::string(std::strerror(errno)));
+  bool done = false;
+  Status s = readMessages("recording", fd, &sink, nullptr, triangles, done);
+  ::close(fd);
+  if (s.isOk() && !done) return Status::internal("the decoded-input recording is incomplete");
+  return s;
 }
 
 }  // namespace sa

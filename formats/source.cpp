@@ -6,6 +6,7 @@
 #include "common/fileio.h"
 #include "formats/conf.h"
 #include "formats/draco.h"
+#include "formats/isolate.h"
 #include "formats/pcd.h"
 #include "formats/las.h"
 #include "formats/mesh_openmesh.h"
@@ -132,15 +133,18 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
         set.towardScanner_.push_back(Eigen::Vector3d::UnitZ());
       }
     } else if (ext == ".obj" || ext == ".off" || ext == ".stl") {
-      auto info = readMeshInfo(path);
-      if (!info) return info.status();
+      // OpenMesh parses the whole file even to count: record what it delivers and replay that.
+      auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
+      SA_RETURN_IF_ERROR(readMesh(path, kDefaultBatchPoints, true, *rec));
+      rec->finish();
       InputFile f;
       f.path = path;
       f.format = InputFormat::kMesh;
-      f.points = info->vertices;
-      f.hasNormals = info->hasNormals;
-      f.hasColors = info->hasColors;
-      f.hasFaces = info->triangles > 0;
+      f.points = rec->points();
+      f.hasNormals = rec->anyNormals();
+      f.hasColors = rec->anyColors();
+      f.hasFaces = rec->triangles() > 0;
+      f.recording = std::move(rec);
       set.files_.push_back(f);
     } else if (ext == ".pcd") {
       auto h = readPcdHeader(path);
@@ -157,8 +161,12 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
                  (h->organized() ? ", organized " + std::to_string(h->width) + "x" + std::to_string(h->height) : ", unorganized");
       set.files_.push_back(f);
     } else if (ext == ".drc") {
-      auto info = readDracoInfo(path);
-      if (!info) return info.status();
+      // libdraco decodes the whole file even to count: record what it delivers and replay that.
+      auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
+      DracoInfo di;
+      SA_RETURN_IF_ERROR(readDraco(path, kDefaultBatchPoints, true, *rec, &di));
+      rec->finish();
+      const DracoInfo* info = &di;
       InputFile f;
       f.path = path;
       f.format = InputFormat::kDraco;
@@ -171,6 +179,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       f.hasClassification = info->hasClassification;
       f.detail = info->triangles ? "mesh, " + std::to_string(info->triangles) + " triangles" : "point cloud";
       if (info->shifted) f.detail += ", positions relative to a recorded origin";
+      f.recording = std::move(rec);
       set.files_.push_back(f);
     } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
       auto layout = readTextLayout(path, textColumns);
@@ -256,7 +265,9 @@ Status InputSet::stream(BatchSink& sink, bool readTriangles, size_t batchPoints)
   for (const auto& f : files_) {
     FileAdapter adapter(sink, f, keepNormals, wantColors, allHaveIntensity(), allHaveConfidence(),
                         allHaveClassification(), base);
-    if (f.format == InputFormat::kLas) {
+    if (f.recording && f.recording->replayable(batchPoints)) {
+      SA_RETURN_IF_ERROR(f.recording->replay(adapter, readTriangles && hasTriangles()));
+    } else if (f.format == InputFormat::kLas) {
       SA_RETURN_IF_ERROR(readLas(f.path, batchPoints, adapter));
     } else if (f.format == InputFormat::kPcd) {
       SA_RETURN_IF_ERROR(readPcd(f.path, batchPoints, adapter));

@@ -1,6 +1,7 @@
 // One entry point for every input a user names: PLY files and Stanford .conf scan sets,
 // several at once. Headers are read up front (cheap, validated); stream() delivers batches.
 #pragma once
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,8 @@ enum class InputFormat { kPly, kLas, kText, kMesh, kPcd, kDraco };
 
 const char* formatName(InputFormat f);
 
+class StreamRecording;
+
 struct InputFile {
   std::string path;
   InputFormat format = InputFormat::kPly;
@@ -26,6 +29,8 @@ struct InputFile {
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
   int scanIndex = -1;           // index into InputSet::towardScanner, or -1
+  // Draco and OBJ/OFF/STL: what the (whole-file) decode in open() delivered, replayed by stream().
+  std::shared_ptr<const StreamRecording> recording;
 };
 
 class InputSet {

@@ -11,6 +11,7 @@
 #include "../common/test_util.h"
 #include "formats/draco.h"
 #include "formats/isolate.h"
+#include "formats/mesh_openmesh.h"
 #include "formats/pcd.h"
 #include "formats/source.h"
 #include "formats/writers.h"
@@ -324,6 +325,77 @@ TEST(FuzzRegressions, EveryStoredFindingIsABadInputError) {
     }
   }
   EXPECT_GE(n, 4);
+}
+
+// Draco and OBJ/OFF/STL are decoded whole by their libraries; InputSet decodes them once, in
+// open(), and replays a recording for every later pass. Proof: the file is deleted after open()
+// and stream() still delivers every point and triangle, twice. Without the recording (size cap
+// of 0 MiB) stream() decodes again and then fails on the deleted file.
+TEST(DracoReal, DecodedOnceThenReplayedForEveryPass) {
+  test::TempDir d;
+  auto ply = InputSet::open({test::sharedData("stanford_bunny/reconstruction/bun_zipper.ply")});
+  ASSERT_TRUE(ply.isOk());
+  Gather ref;
+  ASSERT_TRUE(ply->stream(ref, true).isOk());
+  DracoWriter w(DracoWriteOptions{});
+  ASSERT_TRUE(ply->stream(w, true).isOk());
+  ASSERT_TRUE(w.write(d.file("b.drc")).isOk());
+  {  // an OBJ of the same mesh
+    std::ofstream obj(d.file("b.obj"));
+    obj.precision(9);
+    for (size_t i = 0; i < ref.all.x.size(); ++i) obj << "v " << ref.all.x[i] << " " << ref.all.y[i] << " " << ref.all.z[i] << "\n";
+    struct Tris : BatchSink {
+      std::vector<uint32_t> t;
+      Status onPoints(const PointBatch&) override { return Status::ok(); }
+      Status onTriangles(const uint32_t* idx, size_t n) override {
+        t.insert(t.end(), idx, idx + 3 * n);
+        return Status::ok();
+      }
+    } tris;
+    ASSERT_TRUE(ply->stream(tris, true).isOk());
+    for (size_t i = 0; i < tris.t.size(); i += 3) obj << "f " << tris.t[i] + 1 << " " << tris.t[i + 1] + 1 << " " << tris.t[i + 2] + 1 << "\n";
+  }
+  for (const char* name : {"b.drc", "b.obj"}) {
+    // What a decode of the file delivers (Draco merges the mesh's duplicate vertices).
+    Gather direct;
+    const bool isDraco = std::string(name).ends_with(".drc");
+    ASSERT_TRUE((isDraco ? readDraco(d.file(name), kDefaultBatchPoints, true, direct)
+                         : readMesh(d.file(name), kDefaultBatchPoints, true, direct)).isOk());
+    EXPECT_GT(direct.all.x.size(), 34000u) << name;
+    EXPECT_GT(direct.triangles, 69000u) << name;
+    auto in = InputSet::open({d.file(name)});
+    ASSERT_TRUE(in.isOk()) << in.status().message();
+    EXPECT_EQ(in->pointCount(), direct.all.x.size()) << name;
+    ASSERT_TRUE(in->hasTriangles()) << name;
+    ASSERT_TRUE(std::filesystem::remove(d.file(name)));
+    for (int pass = 0; pass < 2; ++pass) {
+      Gather g;
+      Status s = in->stream(g, true);
+      ASSERT_TRUE(s.isOk()) << name << ": " << s.message();
+      EXPECT_EQ(g.all.x, direct.all.x) << name;
+      EXPECT_EQ(g.all.z, direct.all.z) << name;
+      EXPECT_EQ(g.triangles, direct.triangles) << name;
+      Gather noTris;
+      ASSERT_TRUE(in->stream(noTris, false).isOk());
+      EXPECT_EQ(noTris.triangles, 0u) << name;
+      EXPECT_EQ(noTris.all.y, direct.all.y) << name;
+    }
+  }
+  ASSERT_TRUE(w.write(d.file("c.drc")).isOk());
+  ::setenv("SA_RECORDING_MAX_MB", "0", 1);
+  auto in = InputSet::open({d.file("c.drc")});
+  ::unsetenv("SA_RECORDING_MAX_MB");
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  EXPECT_GT(in->pointCount(), 34000u);  // the counts do not need the recording
+  Gather again;
+  ASSERT_TRUE(in->stream(again, true).isOk());  // decoded again
+  EXPECT_EQ(again.all.x.size(), in->pointCount());
+  EXPECT_GT(again.triangles, 69000u);
+  ASSERT_TRUE(std::filesystem::remove(d.file("c.drc")));
+  Gather gone;
+  Status s = in->stream(gone, true);
+  EXPECT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("c.drc"), std::string::npos) << s.message();
 }
 
 // A reader that loops (as a hostile file could make libdraco or OpenMesh do) is stopped by the
