@@ -46,9 +46,24 @@ bool readAll(int fd, void* p, size_t n) {
   return true;
 }
 
-template <class T>
-bool writeVec(int fd, const std::vector<T>& v) {
-  return v.empty() || writeAll(fd, v.data(), v.size() * sizeof(T));
+// The wire form of a batch (the child's pipe and the recordings): kind, first index, count,
+// attribute flags, then each present array.
+void encodeBatch(const PointBatch& b, std::string& buf) {
+  buf.clear();
+  const uint8_t kind = kBatch;
+  const uint64_t first = b.firstIndex;
+  const uint32_t n = uint32_t(b.size());
+  const uint8_t flags = uint8_t(b.hasNormals() | b.hasColors() << 1 | b.hasIntensity() << 2 | b.hasConfidence() << 3 |
+                                b.hasClassification() << 4 | !b.scan.empty() << 5);
+  auto put = [&](const void* p, size_t k) { buf.append(static_cast<const char*>(p), k); };
+  auto putVec = [&](const auto& v) { put(v.data(), v.size() * sizeof(v[0])); };
+  put(&kind, 1);
+  put(&first, 8);
+  put(&n, 4);
+  put(&flags, 1);
+  putVec(b.x); putVec(b.y); putVec(b.z); putVec(b.nx); putVec(b.ny); putVec(b.nz);
+  putVec(b.r); putVec(b.g); putVec(b.b);
+  putVec(b.intensity); putVec(b.confidence); putVec(b.classification); putVec(b.scan);
 }
 
 // The child's sink: serializes batches and triangles onto the pipe.
@@ -56,17 +71,8 @@ class PipeSink : public BatchSink {
  public:
   explicit PipeSink(int fd) : fd_(fd) {}
   Status onPoints(const PointBatch& b) override {
-    const uint8_t kind = kBatch;
-    const uint64_t first = b.firstIndex;
-    const uint32_t n = uint32_t(b.size());
-    const uint8_t flags = uint8_t(b.hasNormals() | b.hasColors() << 1 | b.hasIntensity() << 2 | b.hasConfidence() << 3 |
-                                  b.hasClassification() << 4 | !b.scan.empty() << 5);
-    bool ok = writeAll(fd_, &kind, 1) && writeAll(fd_, &first, 8) && writeAll(fd_, &n, 4) && writeAll(fd_, &flags, 1) &&
-              writeVec(fd_, b.x) && writeVec(fd_, b.y) && writeVec(fd_, b.z) && writeVec(fd_, b.nx) &&
-              writeVec(fd_, b.ny) && writeVec(fd_, b.nz) && writeVec(fd_, b.r) && writeVec(fd_, b.g) &&
-              writeVec(fd_, b.b) && writeVec(fd_, b.intensity) && writeVec(fd_, b.confidence) &&
-              writeVec(fd_, b.classification) && writeVec(fd_, b.scan);
-    return ok ? Status::ok() : Status::internal("pipe closed");
+    encodeBatch(b, buf_);
+    return writeAll(fd_, buf_.data(), buf_.size()) ? Status::ok() : Status::internal("pipe closed");
   }
   Status onTriangles(const uint32_t* idx, size_t count) override {
     const uint8_t kind = kTriangles;
@@ -77,6 +83,7 @@ class PipeSink : public BatchSink {
 
  private:
   int fd_;
+  std::string buf_;
 };
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -321,22 +328,8 @@ Status StreamRecording::onPoints(const PointBatch& b) {
   normals_ = normals_ || b.hasNormals();
   colors_ = colors_ || b.hasColors();
   if (!ok_) return Status::ok();
-  // The same encoding as the child's pipe (PipeSink), into memory first: one write per batch.
   std::string buf;
-  const uint8_t kind = kBatch;
-  const uint64_t first = b.firstIndex;
-  const uint32_t n = uint32_t(b.size());
-  const uint8_t flags = uint8_t(b.hasNormals() | b.hasColors() << 1 | b.hasIntensity() << 2 | b.hasConfidence() << 3 |
-                                b.hasClassification() << 4 | !b.scan.empty() << 5);
-  auto put = [&](const void* p, size_t k) { buf.append(static_cast<const char*>(p), k); };
-  auto putVec = [&](const auto& v) { put(v.data(), v.size() * sizeof(v[0])); };
-  put(&kind, 1);
-  put(&first, 8);
-  put(&n, 4);
-  put(&flags, 1);
-  putVec(b.x); putVec(b.y); putVec(b.z); putVec(b.nx); putVec(b.ny); putVec(b.nz);
-  putVec(b.r); putVec(b.g); putVec(b.b);
-  putVec(b.intensity); putVec(b.confidence); putVec(b.classification); putVec(b.scan);
+  encodeBatch(b, buf);
   write(buf.data(), buf.size());
   return Status::ok();
 }
