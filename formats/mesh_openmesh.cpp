@@ -9,7 +9,6 @@
 
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <new>
 #include <sstream>
@@ -99,19 +98,6 @@ Status load(const std::string& path, Mesh& mesh, OpenMesh::IO::Options& opt) {
 
 }  // namespace
 
-Result<MeshInfo> readMeshInfoInProcess(const std::string& path) {
-  Mesh mesh;
-  OpenMesh::IO::Options opt;
-  Status s = load(path, mesh, opt);
-  if (!s) return s;
-  MeshInfo info;
-  info.vertices = mesh.n_vertices();
-  for (auto f : mesh.faces()) info.triangles += mesh.valence(f) >= 3 ? mesh.valence(f) - 2 : 0;
-  info.hasNormals = opt.check(OpenMesh::IO::Options::VertexNormal);
-  info.hasColors = opt.check(OpenMesh::IO::Options::VertexColor);
-  return info;
-}
-
 Status readMeshInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
   Mesh mesh;
   OpenMesh::IO::Options opt;
@@ -167,24 +153,6 @@ uint64_t meshLimit(const std::string& path) {
   return std::max<uint64_t>(uint64_t(2) << 30, 64 * (size ? *size : 0));
 }
 }  // namespace
-
-Result<MeshInfo> readMeshInfo(const std::string& path) {
-  if (!std::filesystem::exists(path)) return Status::badInput(path + ": no such file");
-  std::string blob;
-  SA_RETURN_IF_ERROR(runIsolated(
-      path, meshLimit(path),
-      [&](BatchSink&, std::string& out) {
-        auto info = readMeshInfoInProcess(path);
-        if (!info) return info.status();
-        out.assign(reinterpret_cast<const char*>(&*info), sizeof(MeshInfo));
-        return Status::ok();
-      },
-      nullptr, &blob));
-  if (blob.size() != sizeof(MeshInfo)) return Status::internal(path + ": the mesh reader sent no description");
-  MeshInfo info;
-  std::memcpy(&info, blob.data(), sizeof(info));
-  return info;
-}
 
 Status readMesh(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink) {
   if (!std::filesystem::exists(path)) return Status::badInput(path + ": no such file");

@@ -9,16 +9,10 @@
 
 namespace sa {
 
-struct MeshInfo {
-  uint64_t vertices = 0, triangles = 0;
-  bool hasNormals = false, hasColors = false;
-};
-
-Result<MeshInfo> readMeshInfo(const std::string& path);
+// InputSet counts vertices and triangles from what readMesh delivers (it records the stream).
 // Vertices in one or more batches, then the triangles (polygons fan-triangulated).
 Status readMesh(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink);
 // The same in this process: for the fuzzer, which needs OpenMesh's coverage.
-Result<MeshInfo> readMeshInfoInProcess(const std::string& path);
 Status readMeshInProcess(const std::string& path, size_t batchPoints, bool readTriangles, BatchSink& sink);
 
 }  // namespace sa

@@ -163,22 +163,21 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
     } else if (ext == ".drc") {
       // libdraco decodes the whole file even to count: record what it delivers and replay that.
       auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
-      DracoInfo di;
-      SA_RETURN_IF_ERROR(readDraco(path, kDefaultBatchPoints, true, *rec, &di));
+      DracoInfo info;
+      SA_RETURN_IF_ERROR(readDraco(path, kDefaultBatchPoints, true, *rec, &info));
       rec->finish();
-      const DracoInfo* info = &di;
       InputFile f;
       f.path = path;
       f.format = InputFormat::kDraco;
-      f.points = info->points;
-      f.hasNormals = info->hasNormals;
-      f.hasColors = info->hasColors;
-      f.hasFaces = info->triangles > 0;
-      f.hasIntensity = info->hasIntensity;
-      f.hasConfidence = info->hasConfidence;
-      f.hasClassification = info->hasClassification;
-      f.detail = info->triangles ? "mesh, " + std::to_string(info->triangles) + " triangles" : "point cloud";
-      if (info->shifted) f.detail += ", positions relative to a recorded origin";
+      f.points = info.points;
+      f.hasNormals = info.hasNormals;
+      f.hasColors = info.hasColors;
+      f.hasFaces = info.triangles > 0;
+      f.hasIntensity = info.hasIntensity;
+      f.hasConfidence = info.hasConfidence;
+      f.hasClassification = info.hasClassification;
+      f.detail = info.triangles ? "mesh, " + std::to_string(info.triangles) + " triangles" : "point cloud";
+      if (info.shifted) f.detail += ", positions relative to a recorded origin";
       f.recording = std::move(rec);
       set.files_.push_back(f);
     } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
