@@ -1,7 +1,9 @@
 #include <algorithm>
 #include <cstdio>
-#include <filesystem>
 #include <cstring>
+#include <filesystem>
+#include <memory>
+#include <optional>
 #include <sstream>
 
 #include "atlas/pack_file.h"
@@ -9,6 +11,7 @@
 #include "cli/commands.h"
 #include "cli/view_setup.h"
 #include "common/fileio.h"
+#include "preprocess/nearest.h"
 #include "viewer/egl_context.h"
 #include "viewer/eval.h"
 #include "viewer/renderer.h"
@@ -21,21 +24,31 @@ const char* embeddedScript(std::string_view name);
 namespace {
 
 const char* kHelp =
-    "usage: scanatlas eval PACK --reference MESH.ply|SCANS.conf [--path cams.json | --orbit N] [options]\n"
+    "usage: scanatlas eval PACK [--reference MESH|SCANS.conf] [--far] [--path cams.json | --orbit N] [options]\n"
     "\n"
-    "Image error against a reference render of the original data, with the same cameras: the\n"
-    "reference's triangles rasterized on the CPU in double precision (a mesh PLY, or a Stanford\n"
-    "scan set whose range grids are triangulated: neighbouring grid samples, edges longer than\n"
-    "--max-edge dropped). Per view and per configuration: coverage IoU, silhouette error\n"
-    "(pixels whose coverage differs / reference silhouette perimeter), depth error median and\n"
-    "p95 relative to the bounding-box diagonal, normal angular error median, PSNR of the shaded\n"
-    "image (both shaded alike: Lambert, head light, no scan colour), and the frame time.\n"
+    "Image error of the pack's renders, with the same cameras, by two measures:\n"
+    "\n"
+    "  against a reference (--reference): the reference's triangles rasterized on the CPU in\n"
+    "  double precision (a mesh in any format pack reads: PLY, OBJ, OFF, STL, DRC; or a Stanford\n"
+    "  scan set whose range grids are triangulated: neighbouring grid samples, edges longer than\n"
+    "  --max-edge dropped). Per view and configuration: coverage IoU, silhouette error (pixels\n"
+    "  whose coverage differs / reference silhouette perimeter), depth error median and p95\n"
+    "  relative to the bounding-box diagonal, normal angular error median, PSNR of the shaded\n"
+    "  image (both shaded alike: Lambert, head light, no scan colour), and the frame time.\n"
+    "\n"
+    "  reference-free (--far, and always when no --reference is given): for every rendered\n"
+    "  surface pixel, the 3-D distance from its hit point to the nearest input point (a kd-tree\n"
+    "  over the pack's source files), in units of the pack's sample spacing: median, p99 and the\n"
+    "  fractions of pixels beyond 3 and beyond 10 spacings. Surface drawn where no point is\n"
+    "  (walls along scan edges, interpolation across height jumps) shows up here.\n"
     "\n"
     "options:\n"
-    "  --reference FILE       the ground truth (required)\n"
+    "  --reference FILE       the ground truth (a mesh or a .conf scan set)\n"
+    "  --far                  also the reference-free measure when --reference is given\n"
     "  --max-edge X           scan sets: longest grid triangle edge kept (default 3 x median)\n"
     "  --path FILE | --orbit N   cameras (default --orbit 8); --zoom F as for bench\n"
-    "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render\n"
+    "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render (up\n"
+    "                         defaults to the pack's up axis)\n"
     "  --mode LIST            parallax, points (default parallax)\n"
     "  --iterations LIST      parallax step bounds (default 12)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
@@ -43,86 +56,310 @@ const char* kHelp =
     "  --csv FILE             one row per view and configuration plus 'all' summary rows\n"
     "  --plot FILE.png        run time vs error plot (also FILE.svg); needs python3-matplotlib\n"
     "  --json                 summary as JSON on stdout\n"
-    "  -q, --quiet            no table\n";
+    "  -q, --quiet            no tables (per view and summary, on stderr)\n";
+
+struct Options {
+  std::vector<Camera> cams;
+  std::vector<RenderMode> modes;
+  std::vector<int> iterations;
+  int repeat = 3;
+  double maxEdge = 0;
+  bool far = false, quiet = false, json = false;
+};
+
+// The reference renders, made once for every configuration.
+struct Reference {
+  TriangleMesh mesh;
+  std::vector<ReferenceView> views;
+  std::vector<Image> shaded;
+  double diag = 0;
+};
+
+struct ViewResult {
+  double ms = 0;
+  std::optional<ViewMetrics> ref;
+  std::optional<FarStats> far;
+};
 
 struct Row {
   std::string mode, skips;
   int iterations = 0;
-  double frameMs = 0, iou = 0, iouMin = 1, sil = 0, depthMed = 0, depthP95 = 0, normalMed = -1, psnr = 0;
+  double frameMs = 0;
+  bool hasRef = false;
+  double iou = 0, iouMin = 1, sil = 0, depthMed = 0, depthP95 = 0, normalMed = -1, psnr = 0;
+  std::optional<FarStats> far;
+  std::vector<ViewResult> views;
 };
 
-}  // namespace
-
-int cmdEval(int argc, char** argv) {
-  Args a;
-  Status s = a.parse(argc, argv,
-                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "repeat",
-                      "csv", "plot"},
-                     {"json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
-  if (a.flag("help")) {
-    std::fputs(kHelp, stdout);
-    return 0;
-  }
-  if (!s) return reportError(s);
-  if (a.positionals().size() != 1) return reportError(Status::badInput("eval: give exactly one pack (see --help)"));
-  if (!a.has("reference")) return reportError(Status::badInput("eval: --reference MESH.ply|SCANS.conf is required"));
-  PackReader pack;
-  s = pack.open(a.positionals()[0]);
-  if (!s) return reportError(s);
-  std::vector<Camera> cams;
-  s = camerasFromArgs(a, pack, 8, 1024, cams);
-  if (!s) return reportError(s);
-  double maxEdge = 0;
+Status parseOptions(const Args& a, const PackReader& pack, Options& o) {
+  SA_RETURN_IF_ERROR(camerasFromArgs(a, pack, 8, 1024, o.cams));
   if (a.has("max-edge")) {
     auto v = parseNumber("max-edge", a.get("max-edge"));
-    if (!v) return reportError(v.status());
-    maxEdge = *v;
+    if (!v) return v.status();
+    o.maxEdge = *v;
   }
   auto repeat = parseInt("repeat", a.get("repeat", "3"), 1, 1000);
-  if (!repeat) return reportError(repeat.status());
-  std::vector<RenderMode> modes;
-  std::vector<int> iters;
-  s = modesAndIterations(a, modes, iters);
-  if (!s) return reportError(s);
-  if (a.has("plot")) {
-    // Check the plotting dependency before the long part.
-    if (std::system("/usr/bin/python3 -c 'import matplotlib' >/dev/null 2>&1") != 0)
-      return reportError(Status::badInput("--plot needs Debian's python3-matplotlib: apt-get install python3-matplotlib"));
-  }
-  const bool quiet = a.flag("quiet") || a.flag("json");
-  auto ref = loadReference(a.get("reference"), maxEdge);
-  if (!ref) return reportError(ref.status());
-  if (!quiet) std::fprintf(stderr, "eval: reference %s\n", ref->description.c_str());
+  if (!repeat) return repeat.status();
+  o.repeat = int(*repeat);
+  SA_RETURN_IF_ERROR(modesAndIterations(a, o.modes, o.iterations));
+  if (a.has("plot") && std::system("/usr/bin/python3 -c 'import matplotlib' >/dev/null 2>&1") != 0)
+    return Status::badInput("--plot needs Debian's python3-matplotlib: apt-get install python3-matplotlib");
+  if (a.has("plot") && !a.has("reference"))
+    return Status::badInput("--plot draws run time against the reference's depth error and IoU: give --reference");
+  o.far = a.flag("far") || !a.has("reference");
+  o.json = a.flag("json");
+  o.quiet = a.flag("quiet") || o.json;
+  return Status::ok();
+}
+
+Result<Reference> makeReference(const std::string& path, const Options& o, const RenderSettings& base) {
+  auto mesh = loadReference(path, o.maxEdge);
+  if (!mesh) return mesh.status();
+  Reference r;
+  r.mesh = std::move(*mesh);
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-  for (size_t i = 0; i < ref->positions.size(); i += 3) {
-    lo = lo.cwiseMin(Eigen::Vector3d(&ref->positions[i]));
-    hi = hi.cwiseMax(Eigen::Vector3d(&ref->positions[i]));
+  for (size_t i = 0; i < r.mesh.positions.size(); i += 3) {
+    lo = lo.cwiseMin(Eigen::Vector3d(&r.mesh.positions[i]));
+    hi = hi.cwiseMax(Eigen::Vector3d(&r.mesh.positions[i]));
   }
-  const double diag = (hi - lo).norm();
+  r.diag = (hi - lo).norm();
+  for (const Camera& c : o.cams) {
+    r.views.push_back(referenceView(r.mesh, c));
+    r.shaded.push_back(shadeReference(r.views.back(), c, base.baseColor, base.background));
+  }
+  return r;
+}
+
+// Median frame time per view, timed the way bench times: the views cycled back to back
+// without read-back (llvmpipe's point rendering runs up to 3x faster right after a full
+// read-back, which a frame shown on screen never gets).
+Status timeViews(Renderer& renderer, const Options& o, const RenderSettings& rs, std::vector<double>& ms) {
+  std::vector<std::vector<double>> perView(o.cams.size());
+  for (int r = 0; r < o.repeat + 1; ++r)
+    for (size_t v = 0; v < o.cams.size(); ++v) {
+      FrameResult tr;
+      SA_RETURN_IF_ERROR(renderer.render(o.cams[v], rs, tr, 0u));
+      if (r > 0) perView[v].push_back(tr.stats.cpuMs);  // the first round warms up
+    }
+  ms.clear();
+  for (auto& t : perView) ms.push_back(percentile(t, 0.5));
+  return Status::ok();
+}
+
+Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options& o, const Reference* ref,
+                      const NearestSamples* samples, const RenderSettings& rs, Row& row) {
+  std::vector<double> ms;
+  SA_RETURN_IF_ERROR(timeViews(renderer, o, rs, ms));
+  const Eigen::Vector3d origin(pack.meta().origin);
+  std::vector<double> depthAll, normalAll, farAll;
+  double psnrSum = 0, iouSum = 0, silSum = 0;
+  for (size_t v = 0; v < o.cams.size(); ++v) {
+    FrameResult fr;
+    const unsigned want = kReadColor | kReadDepth | (rs.mode == RenderMode::kParallax ? kReadNormals : 0u);
+    SA_RETURN_IF_ERROR(renderer.render(o.cams[v], rs, fr, want));
+    ViewResult vr;
+    vr.ms = ms[v];
+    if (ref) {
+      vr.ref = evaluateView(fr.color, fr.depth, fr.normals, ref->views[v], ref->shaded[v], ref->diag);
+      depthAll.insert(depthAll.end(), vr.ref->depthErrors.begin(), vr.ref->depthErrors.end());
+      normalAll.insert(normalAll.end(), vr.ref->normalErrors.begin(), vr.ref->normalErrors.end());
+      psnrSum += vr.ref->psnr;
+      iouSum += vr.ref->iou;
+      silSum += vr.ref->silhouetteError;
+      row.iouMin = std::min(row.iouMin, vr.ref->iou);
+      vr.ref->depthErrors.clear();
+      vr.ref->normalErrors.clear();
+    }
+    if (samples) {
+      const std::vector<double> hits = surfacePoints(o.cams[v], fr.depth, origin);
+      std::vector<double> d(hits.size() / 3);
+      samples->distances(hits.data(), d.size(), d.data());
+      for (double& x : d) x /= pack.meta().sampleSpacing;
+      vr.far = summarizeFar(d);
+      farAll.insert(farAll.end(), d.begin(), d.end());
+    }
+    row.views.push_back(std::move(vr));
+  }
+  const double n = double(o.cams.size());
+  row.frameMs = percentile(ms, 0.5);
+  if (ref) {
+    row.hasRef = true;
+    row.iou = iouSum / n;
+    row.sil = silSum / n;
+    row.psnr = psnrSum / n;
+    row.depthMed = percentile(depthAll, 0.5);
+    row.depthP95 = percentile(depthAll, 0.95);
+    row.normalMed = normalAll.empty() ? -1 : percentile(normalAll, 0.5);
+  }
+  if (samples) row.far = summarizeFar(farAll);
+  return Status::ok();
+}
+
+std::string fmtNormal(double deg) { return deg < 0 ? "-" : std::to_string(deg).substr(0, 6); }
+
+// One line of figures (a view or a configuration's summary) for the terminal tables.
+void printFigures(const char* label, double ms, const Row* sum, const ViewResult* view) {
+  std::fprintf(stderr, "%-26s %9.2f", label, ms);
+  if (sum && sum->hasRef)
+    std::fprintf(stderr, " %8.4f %8.4f %7.3f %11.5f %11.4f %9s %7.2f", sum->iou, sum->iouMin, sum->sil,
+                 100 * sum->depthMed, 100 * sum->depthP95, fmtNormal(sum->normalMed).c_str(), sum->psnr);
+  if (view && view->ref)
+    std::fprintf(stderr, " %8.4f %8s %7.3f %11.5f %11.4f %9s %7.2f", view->ref->iou, "", view->ref->silhouetteError,
+                 100 * view->ref->depthMedian, 100 * view->ref->depthP95, fmtNormal(view->ref->normalMedianDeg).c_str(),
+                 view->ref->psnr);
+  const std::optional<FarStats>& far = sum ? sum->far : view->far;
+  if (far)
+    std::fprintf(stderr, " %8.3f %8.3f %9.4f %9.4f", far->median, far->p99, 100 * far->beyond3, 100 * far->beyond10);
+  std::fprintf(stderr, "\n");
+}
+
+void printHeader(const char* first, bool ref, bool far) {
+  std::fprintf(stderr, "%-26s %9s", first, "frame ms");
+  if (ref)
+    std::fprintf(stderr, " %8s %8s %7s %11s %11s %9s %7s", "IoU", "IoU min", "silh.", "depth med%", "depth p95%",
+                 "normal°", "PSNR dB");
+  if (far) std::fprintf(stderr, " %8s %8s %9s %9s", "far med", "far p99", ">3 sp %", ">10 sp %");
+  std::fprintf(stderr, "\n");
+}
+
+std::string configLabel(const Row& r) {
+  return r.mode + (r.iterations ? " " + std::to_string(r.iterations) + " it" : "");
+}
+
+void printTables(const std::vector<Row>& rows) {
+  const bool ref = !rows.empty() && rows[0].hasRef, far = !rows.empty() && rows[0].far.has_value();
+  printHeader("view", ref, far);
+  for (const Row& r : rows)
+    for (size_t v = 0; v < r.views.size(); ++v) {
+      const std::string label = configLabel(r) + ", view " + std::to_string(v);
+      printFigures(label.c_str(), r.views[v].ms, nullptr, &r.views[v]);
+    }
+  std::fprintf(stderr, "\n");
+  printHeader("configuration (all views)", ref, far);
+  for (const Row& r : rows) printFigures(configLabel(r).c_str(), r.frameMs, &r, nullptr);
+  if (far) std::fprintf(stderr, "far: distance from each rendered surface pixel to the nearest input point, in sample spacings\n");
+}
+
+std::string farJson(const std::optional<FarStats>& f) {
+  if (!f) return "null";
+  char buf[256];
+  std::snprintf(buf, sizeof(buf), "{\"pixels\": %zu, \"median\": %.6g, \"p99\": %.6g, \"beyond3\": %.6g, \"beyond10\": %.6g}",
+                f->pixels, f->median, f->p99, f->beyond3, f->beyond10);
+  return buf;
+}
+
+void printJson(const std::vector<Row>& rows, const PackReader& pack, const Reference* ref, const Options& o,
+               const std::string& renderer) {
+  std::printf("{\"pack\": \"%s\", \"reference\": %s, \"renderer\": \"%s\", \"views\": %zu, \"width\": %d, "
+              "\"height\": %d, \"diagonal\": %s, \"spacing\": %.9g, \"configs\": [",
+              jsonEscape(pack.path()).c_str(), ref ? ("\"" + jsonEscape(ref->mesh.description) + "\"").c_str() : "null",
+              jsonEscape(renderer).c_str(), o.cams.size(), o.cams[0].width, o.cams[0].height,
+              ref ? std::to_string(ref->diag).c_str() : "null", pack.meta().sampleSpacing);
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const Row& r = rows[i];
+    std::printf("%s{\"mode\": \"%s\", \"iterations\": %d, \"frame_ms\": %.4f", i ? ", " : "", r.mode.c_str(), r.iterations,
+                r.frameMs);
+    if (r.hasRef)
+      std::printf(", \"iou\": %.6f, \"iou_min\": %.6f, \"silhouette_error\": %.6f, \"depth_median\": %.8g, "
+                  "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f",
+                  r.iou, r.iouMin, r.sil, r.depthMed, r.depthP95,
+                  r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr);
+    std::printf(", \"far\": %s, \"per_view\": [", farJson(r.far).c_str());
+    for (size_t v = 0; v < r.views.size(); ++v) {
+      const ViewResult& vr = r.views[v];
+      std::printf("%s{\"view\": %zu, \"frame_ms\": %.4f", v ? ", " : "", v, vr.ms);
+      if (vr.ref)
+        std::printf(", \"iou\": %.6f, \"depth_median\": %.8g, \"depth_p95\": %.8g, \"normal_median_deg\": %s",
+                    vr.ref->iou, vr.ref->depthMedian, vr.ref->depthP95,
+                    vr.ref->normalMedianDeg < 0 ? "null" : std::to_string(vr.ref->normalMedianDeg).c_str());
+      std::printf(", \"far\": %s}", farJson(vr.far).c_str());
+    }
+    std::printf("]}");
+  }
+  std::printf("]}\n");
+}
+
+std::string csvText(const std::vector<Row>& rows, const PackReader& pack) {
+  std::ostringstream csv;
+  csv << "pack,mode,iterations,skips,view,frame_ms,iou,silhouette_error,depth_median,depth_p95,normal_median_deg,psnr,"
+         "far_median,far_p99,far_beyond3,far_beyond10\n";
+  auto farCols = [&](const std::optional<FarStats>& f) {
+    if (!f) return std::string(",,,");
+    std::ostringstream s;
+    s << f->median << "," << f->p99 << "," << f->beyond3 << "," << f->beyond10;
+    return s.str();
+  };
+  for (const Row& r : rows) {
+    const std::string head = jsonEscape(pack.path()) + "," + r.mode + "," + std::to_string(r.iterations) + "," + r.skips + ",";
+    for (size_t v = 0; v < r.views.size(); ++v) {
+      const ViewResult& vr = r.views[v];
+      csv << head << v << "," << vr.ms << ",";
+      if (vr.ref)
+        csv << vr.ref->iou << "," << vr.ref->silhouetteError << "," << vr.ref->depthMedian << "," << vr.ref->depthP95
+            << "," << vr.ref->normalMedianDeg << "," << vr.ref->psnr << ",";
+      else
+        csv << ",,,,,,";
+      csv << farCols(vr.far) << "\n";
+    }
+    csv << head << "all," << r.frameMs << ",";
+    if (r.hasRef)
+      csv << r.iou << "," << r.sil << "," << r.depthMed << "," << r.depthP95 << "," << r.normalMed << "," << r.psnr << ",";
+    else
+      csv << ",,,,,,";
+    csv << farCols(r.far) << "\n";
+  }
+  return csv.str();
+}
+
+Status writePlot(const std::string& text, const std::string& out) {
+  ScratchDir tmp;
+  SA_RETURN_IF_ERROR(tmp.create(std::filesystem::temp_directory_path().string(), "scanatlas-plot-"));
+  const std::string csvPath = joinPath(tmp.path(), "summary.csv"), script = joinPath(tmp.path(), "plot.py");
+  SA_RETURN_IF_ERROR(writeFileAtomic(csvPath, text.data(), text.size()));
+  const char* py = embeddedScript("plot_tradeoff.py");
+  SA_RETURN_IF_ERROR(writeFileAtomic(script, py, std::strlen(py)));
+  const std::string cmd = "/usr/bin/python3 '" + script + "' '" + csvPath + "' '" + out + "'";
+  if (std::system(cmd.c_str()) != 0) return Status::internal("plotting failed: " + cmd);
+  return Status::ok();
+}
+
+int runEval(const Args& a) {
+  PackReader pack;
+  Status s = pack.open(a.positionals()[0]);
+  if (!s) return reportError(s);
+  Options o;
+  s = parseOptions(a, pack, o);
+  if (!s) return reportError(s);
   RenderSettings base;
   base.useColor = false;  // both images shaded alike
-  std::vector<ReferenceView> views;
-  std::vector<Image> shaded;
-  for (const Camera& c : cams) {
-    views.push_back(referenceView(*ref, c));
-    shaded.push_back(shadeReference(views.back(), c, base.baseColor, base.background));
+  std::unique_ptr<Reference> ref;
+  if (a.has("reference")) {
+    auto r = makeReference(a.get("reference"), o, base);
+    if (!r) return reportError(r.status());
+    ref = std::make_unique<Reference>(std::move(*r));
+    if (!o.quiet) std::fprintf(stderr, "eval: reference %s\n", ref->mesh.description.c_str());
   }
-
+  std::unique_ptr<NearestSamples> samples;
+  SourcePoints src;
+  const bool needPoints = o.far || std::count(o.modes.begin(), o.modes.end(), RenderMode::kPoints) > 0;
+  if (needPoints) {
+    s = loadSourcePoints(pack, src);
+    if (!s) return reportError(s);
+  }
   EglContext ctx;
   s = ctx.init();
   if (!s) return reportError(s);
   Renderer renderer;
   s = renderer.init(pack);
   if (!s) return reportError(s);
-  if (std::find(modes.begin(), modes.end(), RenderMode::kPoints) != modes.end()) {
-    s = uploadSourcePoints(pack, renderer);
+  if (std::count(o.modes.begin(), o.modes.end(), RenderMode::kPoints) > 0) {
+    s = renderer.setPoints(src.xyz, src.rgba, pack.meta().sampleSpacing);
     if (!s) return reportError(s);
   }
-  std::ostringstream csv;
-  csv << "pack,mode,iterations,skips,view,frame_ms,iou,silhouette_error,depth_median,depth_p95,normal_median_deg,psnr\n";
+  if (o.far) samples = std::make_unique<NearestSamples>(std::move(src.xyz));
   std::vector<Row> rows;
-  for (RenderMode mode : modes) {
-    const std::vector<int> its = mode == RenderMode::kPoints ? std::vector<int>{0} : iters;
+  for (RenderMode mode : o.modes) {
+    const std::vector<int> its = mode == RenderMode::kPoints ? std::vector<int>{0} : o.iterations;
     for (int it : its) {
       RenderSettings rs = base;
       rs.mode = mode;
@@ -131,97 +368,48 @@ int cmdEval(int argc, char** argv) {
       row.mode = modeName(mode);
       row.iterations = it;
       row.skips = mode == RenderMode::kPoints ? "-" : "all";
-      // Timing first, the way bench times: the views cycled back to back without read-back
-      // (llvmpipe's point rendering runs up to 3x faster right after a full read-back, which
-      // a frame shown on screen never gets).
-      std::vector<std::vector<double>> perView(cams.size());
-      for (int64_t r = 0; r < *repeat + 1; ++r) {
-        for (size_t v = 0; v < cams.size(); ++v) {
-          FrameResult tr;
-          s = renderer.render(cams[v], rs, tr, 0u);
-          if (!s) return reportError(s);
-          if (r > 0) perView[v].push_back(tr.stats.cpuMs);  // the first round warms up
-        }
-      }
-      std::vector<double> times, depthAll, normalAll;
-      double psnrSum = 0, iouSum = 0, silSum = 0;
-      for (size_t v = 0; v < cams.size(); ++v) {
-        FrameResult fr;
-        s = renderer.render(cams[v], rs, fr, kReadColor | kReadDepth | (mode == RenderMode::kParallax ? kReadNormals : 0u));
-        if (!s) return reportError(s);
-        const double ms = percentile(perView[v], 0.5);
-        times.push_back(ms);
-        ViewMetrics m = evaluateView(fr.color, fr.depth, fr.normals, views[v], shaded[v], diag);
-        depthAll.insert(depthAll.end(), m.depthErrors.begin(), m.depthErrors.end());
-        normalAll.insert(normalAll.end(), m.normalErrors.begin(), m.normalErrors.end());
-        psnrSum += m.psnr;
-        iouSum += m.iou;
-        silSum += m.silhouetteError;
-        row.iouMin = std::min(row.iouMin, m.iou);
-        csv << jsonEscape(pack.path()) << "," << row.mode << "," << it << "," << row.skips << "," << v << "," << ms << ","
-            << m.iou << "," << m.silhouetteError << "," << m.depthMedian << "," << m.depthP95 << "," << m.normalMedianDeg
-            << "," << m.psnr << "\n";
-      }
-      const double n = double(cams.size());
-      row.frameMs = percentile(times, 0.5);
-      row.iou = iouSum / n;
-      row.sil = silSum / n;
-      row.psnr = psnrSum / n;
-      row.depthMed = percentile(depthAll, 0.5);
-      row.depthP95 = percentile(depthAll, 0.95);
-      row.normalMed = normalAll.empty() ? -1 : percentile(normalAll, 0.5);
-      csv << jsonEscape(pack.path()) << "," << row.mode << "," << it << "," << row.skips << ",all," << row.frameMs << ","
-          << row.iou << "," << row.sil << "," << row.depthMed << "," << row.depthP95 << "," << row.normalMed << ","
-          << row.psnr << "\n";
-      rows.push_back(row);
+      s = evaluateConfig(renderer, pack, o, ref.get(), samples.get(), rs, row);
+      if (!s) return reportError(s);
+      rows.push_back(std::move(row));
     }
   }
-  if (!quiet) {
-    std::fprintf(stderr, "%-9s %5s %10s %8s %8s %8s %12s %12s %10s %8s\n", "mode", "iters", "frame ms", "IoU",
-                 "IoU min", "silh.", "depth med %", "depth p95 %", "normal deg", "PSNR dB");
-    for (const Row& r : rows)
-      std::fprintf(stderr, "%-9s %5s %10.2f %8.4f %8.4f %8.3f %12.5f %12.4f %10s %8.2f\n", r.mode.c_str(),
-                   r.iterations ? std::to_string(r.iterations).c_str() : "-", r.frameMs, r.iou, r.iouMin, r.sil,
-                   100 * r.depthMed, 100 * r.depthP95,
-                   r.normalMed < 0 ? "-" : std::to_string(r.normalMed).substr(0, 6).c_str(), r.psnr);
-    std::fprintf(stderr, "renderer: %s; %zu view(s) at %dx%d; errors relative to the reference diagonal %.6g\n",
-                 ctx.renderer().c_str(), cams.size(), cams[0].width, cams[0].height, diag);
+  if (!o.quiet) {
+    printTables(rows);
+    std::fprintf(stderr, "renderer: %s; %zu view(s) at %dx%d", ctx.renderer().c_str(), o.cams.size(), o.cams[0].width,
+                 o.cams[0].height);
+    if (ref) std::fprintf(stderr, "; depth errors relative to the reference diagonal %.6g", ref->diag);
+    if (samples) std::fprintf(stderr, "; sample spacing %.6g", pack.meta().sampleSpacing);
+    std::fprintf(stderr, "\n");
   }
-  if (a.flag("json")) {
-    std::printf("{\"pack\": \"%s\", \"reference\": \"%s\", \"renderer\": \"%s\", \"views\": %zu, \"width\": %d, "
-                "\"height\": %d, \"diagonal\": %.9g, \"configs\": [",
-                jsonEscape(pack.path()).c_str(), jsonEscape(ref->description).c_str(), jsonEscape(ctx.renderer()).c_str(),
-                cams.size(), cams[0].width, cams[0].height, diag);
-    for (size_t i = 0; i < rows.size(); ++i) {
-      const Row& r = rows[i];
-      std::printf("%s{\"mode\": \"%s\", \"iterations\": %d, \"frame_ms\": %.4f, \"iou\": %.6f, \"iou_min\": %.6f, "
-                  "\"silhouette_error\": %.6f, \"depth_median\": %.8g, \"depth_p95\": %.8g, \"normal_median_deg\": %s, "
-                  "\"psnr\": %.4f}",
-                  i ? ", " : "", r.mode.c_str(), r.iterations, r.frameMs, r.iou, r.iouMin, r.sil, r.depthMed, r.depthP95,
-                  r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr);
-    }
-    std::printf("]}\n");
-  }
-  const std::string text = csv.str();
+  if (o.json) printJson(rows, pack, ref.get(), o, ctx.renderer());
+  const std::string text = csvText(rows, pack);
   if (a.has("csv")) {
     s = writeFileAtomic(a.get("csv"), text.data(), text.size());
     if (!s) return reportError(s);
   }
   if (a.has("plot")) {
-    ScratchDir tmp;
-    s = tmp.create(std::filesystem::temp_directory_path().string(), "scanatlas-plot-");
+    s = writePlot(text, a.get("plot"));
     if (!s) return reportError(s);
-    const std::string csvPath = joinPath(tmp.path(), "summary.csv"), script = joinPath(tmp.path(), "plot.py");
-    s = writeFileAtomic(csvPath, text.data(), text.size());
-    if (!s) return reportError(s);
-    const char* py = embeddedScript("plot_tradeoff.py");
-    s = writeFileAtomic(script, py, std::strlen(py));
-    if (!s) return reportError(s);
-    const std::string cmd = "/usr/bin/python3 '" + script + "' '" + csvPath + "' '" + a.get("plot") + "'";
-    if (std::system(cmd.c_str()) != 0) return reportError(Status::internal("plotting failed: " + cmd));
-    if (!quiet) std::fprintf(stderr, "eval: wrote %s and its .svg\n", a.get("plot").c_str());
+    if (!o.quiet) std::fprintf(stderr, "eval: wrote %s and its .svg\n", a.get("plot").c_str());
   }
   return 0;
+}
+
+}  // namespace
+
+int cmdEval(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv,
+                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "repeat",
+                      "csv", "plot"},
+                     {"far", "json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().size() != 1) return reportError(Status::badInput("eval: give exactly one pack (see --help)"));
+  return runEval(a);
 }
 
 }  // namespace sa

@@ -63,4 +63,18 @@ ViewMetrics evaluateView(const Image& tc, const std::vector<float>& td, const st
   return m;
 }
 
+std::vector<double> surfacePoints(const Camera& cam, const std::vector<float>& depth, const Eigen::Vector3d& origin) {
+  std::vector<double> out;
+  const Eigen::Vector3d eye = cam.eye - origin, fwd = cam.forward();
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const float d = depth[size_t(y) * cam.width + x];
+      if (!std::isfinite(d)) continue;
+      const Eigen::Vector3d dir = cam.rayDirection(x + 0.5, y + 0.5);
+      const Eigen::Vector3d p = eye + dir * (double(d) / dir.dot(fwd));
+      out.insert(out.end(), {p.x(), p.y(), p.z()});
+    }
+  return out;
+}
+
 }  // namespace sa

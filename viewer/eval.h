@@ -26,4 +26,8 @@ ViewMetrics evaluateView(const Image& testColor, const std::vector<float>& testD
 
 double percentile(std::vector<double> v, double q);
 
+// The hit point of every pixel with finite linear depth (row 0 at the top), relative to
+// `origin`, xyz interleaved, formed in double from the camera.
+std::vector<double> surfacePoints(const Camera& cam, const std::vector<float>& depth, const Eigen::Vector3d& origin);
+
 }  // namespace sa

@@ -6,6 +6,7 @@
 
 #include "formats/conf.h"
 #include "formats/ply.h"
+#include "formats/source.h"
 #include "preprocess/raster.h"
 
 namespace sa {
@@ -34,12 +35,18 @@ class MeshSink : public BatchSink {
 }  // namespace
 
 Result<TriangleMesh> loadMesh(const std::string& path) {
+  // Every mesh format pack reads (PLY, OBJ, OFF, STL, Draco), through the same readers.
+  auto input = InputSet::open({path});
+  if (!input) return input.status();
+  if (!input->hasTriangles()) return Status::badInput(path + ": has no faces (a reference needs triangles)");
   TriangleMesh m;
+  m.positions.reserve(3 * input->pointCount());
   MeshSink sink(m);
-  PlyReadOptions opt;
-  Status s = readPly(path, opt, sink);
-  if (!s) return s;
+  SA_RETURN_IF_ERROR(input->stream(sink, true));
   if (m.indices.empty()) return Status::badInput(path + ": has no faces (a reference needs triangles)");
+  const size_t nv = m.positions.size() / 3;
+  for (uint32_t v : m.indices)
+    if (v >= nv) return Status::badInput(path + ": a face names vertex " + std::to_string(v) + " of " + std::to_string(nv));
   return m;
 }
 
