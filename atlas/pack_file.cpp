@@ -58,11 +58,15 @@ Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vect
   meta_.cellCount = static_cast<uint32_t>(cells.size());
   cells_ = std::move(cells);
   note_ = note;
-  const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageSize) * meta_.pageSize;
+  const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageWidth) * meta_.pageHeight;
   metaOff_ = kSectionAlign;
   cellOff_ = alignUp(metaOff_ + sizeof(PackMeta));
   hghtOff_ = alignUp(cellOff_ + cells_.size() * sizeof(CellRecord));
   uint64_t end = hghtOff_ + pageTexels * meta_.pageCount * 2;
+  if (meta_.flags & kPackHasNormals) {
+    nrmlOff_ = alignUp(end);
+    end = nrmlOff_ + pageTexels * meta_.pageCount * 2;
+  }
   if (meta_.flags & kPackHasColor) {
     colrOff_ = alignUp(end);
     end = colrOff_ + pageTexels * meta_.pageCount * 4;
@@ -76,11 +80,13 @@ Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vect
   return Status::ok();
 }
 
-Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* rgba) {
+Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba) {
   const CellRecord& c = cells_[cellIndex];
-  const uint32_t W = c.tileW, H = c.tileH, P = meta_.pageSize;
-  const uint64_t pageTexels = static_cast<uint64_t>(P) * P;
+  const uint32_t W = c.tileW, H = c.tileH, P = meta_.pageWidth;
+  const uint64_t pageTexels = static_cast<uint64_t>(P) * meta_.pageHeight;
+  if (!(meta_.flags & kPackHasNormals)) normals = nullptr;
   std::vector<uint16_t> row(W + 2);
+  std::vector<uint8_t> rown(normals ? (W + 2) * 2 : 0);
   std::vector<uint8_t> rowc(rgba ? (W + 2) * 4 : 0);
   // Rows -1 .. H (gutter rows repeat the edge rows; gutter columns repeat the edge texels).
   for (int64_t j = -1; j <= static_cast<int64_t>(H); ++j) {
@@ -88,17 +94,19 @@ Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const 
     for (uint32_t i = 0; i < W + 2; ++i) {
       const uint32_t si = std::min(std::max(i, 1u) - 1, W - 1);
       row[i] = heights[static_cast<size_t>(sj) * W + si];
+      if (normals) std::memcpy(&rown[i * 2], &normals[(static_cast<size_t>(sj) * W + si) * 2], 2);
       if (rgba) std::memcpy(&rowc[i * 4], &rgba[(static_cast<size_t>(sj) * W + si) * 4], 4);
     }
     const uint64_t texel = pageTexels * c.page + static_cast<uint64_t>(c.tileY + j) * P + (c.tileX - 1);
     SA_RETURN_IF_ERROR(file_.pwriteAll(row.data(), row.size() * 2, hghtOff_ + texel * 2));
+    if (normals) SA_RETURN_IF_ERROR(file_.pwriteAll(rown.data(), rown.size(), nrmlOff_ + texel * 2));
     if (rgba) SA_RETURN_IF_ERROR(file_.pwriteAll(rowc.data(), rowc.size(), colrOff_ + texel * 4));
   }
   return Status::ok();
 }
 
 Status PackWriter::finish() {
-  const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageSize) * meta_.pageSize;
+  const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageWidth) * meta_.pageHeight;
   SA_RETURN_IF_ERROR(file_.pwriteAll(&meta_, sizeof(meta_), metaOff_));
   SA_RETURN_IF_ERROR(file_.pwriteAll(cells_.data(), cells_.size() * sizeof(CellRecord), cellOff_));
   if (!note_.empty()) SA_RETURN_IF_ERROR(file_.pwriteAll(note_.data(), note_.size(), noteOff_));
@@ -109,6 +117,8 @@ Status PackWriter::finish() {
                             crcOf(reinterpret_cast<const uint8_t*>(cells_.data()), cells_.size() * sizeof(CellRecord))));
   const uint64_t hSize = pageTexels * meta_.pageCount * 2;
   sec.push_back(makeSection("HGHT", hghtOff_, hSize, crcOfFile(file_.fd(), hghtOff_, hSize)));
+  if (meta_.flags & kPackHasNormals)
+    sec.push_back(makeSection("NRML", nrmlOff_, hSize, crcOfFile(file_.fd(), nrmlOff_, hSize)));
   if (meta_.flags & kPackHasColor) {
     const uint64_t cSize = pageTexels * meta_.pageCount * 4;
     sec.push_back(makeSection("COLR", colrOff_, cSize, crcOfFile(file_.fd(), colrOff_, cSize)));
@@ -167,6 +177,10 @@ Status PackReader::open(const std::string& path) {
                             " is newer than this program understands (version " + std::to_string(kPackVersion) +
                             "); update scanatlas");
   if (header_->version == 0) return Status::badInput(path + ": invalid pack format version 0");
+  if (header_->version < kPackVersion)
+    return Status::badInput(path + ": pack format version " + std::to_string(header_->version) +
+                            " was made by an older scanatlas; pack its sources again (this program writes and reads "
+                            "version " + std::to_string(kPackVersion) + ")");
   if (header_->fileSize != size_)
     return Status::badInput(path + ": file is " + std::to_string(size_) + " bytes but its header says " +
                             std::to_string(header_->fileSize) + " (truncated or appended to)");
@@ -196,14 +210,22 @@ Status PackReader::open(const std::string& path) {
   if (crcOf(base_ + cell->offset, cell->size) != cell->crc)
     return Status::badInput(path + ": CELL checksum mismatch (file corrupt)");
   cells_ = reinterpret_cast<const CellRecord*>(base_ + cell->offset);
-  const uint32_t P = meta_->pageSize;
-  if (P == 0 || P > 65536 || (P & (P - 1)))
-    return Status::badInput(path + ": page size " + std::to_string(P) + " is not a power of two <= 65536");
-  const uint64_t pageTexels = uint64_t(P) * P;
+  const uint32_t P = meta_->pageWidth, PH = meta_->pageHeight;
+  for (uint32_t d : {P, PH})
+    if (d == 0 || d > 65536 || (d & (d - 1)))
+      return Status::badInput(path + ": page size " + std::to_string(P) + "x" + std::to_string(PH) +
+                              " is not a power of two <= 65536 on each side");
+  const uint64_t pageTexels = uint64_t(P) * PH;
   // pageTexels * pageCount * 4 can pass 2^64 for hostile headers; bound the count by the file first.
   if (meta_->pageCount > size_ / (pageTexels * 2) || hght->size != pageTexels * meta_->pageCount * 2)
     return Status::badInput(path + ": HGHT section size does not match page size and count");
   hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
+  if (meta_->flags & kPackHasNormals) {
+    const SectionEntry* nrml = find("NRML");
+    if (!nrml || nrml->size != pageTexels * meta_->pageCount * 2)
+      return Status::badInput(path + ": normal flag set but NRML section missing or of the wrong size");
+    nrml_ = base_ + nrml->offset;
+  }
   if (meta_->flags & kPackHasColor) {
     const SectionEntry* colr = find("COLR");
     if (!colr || colr->size != pageTexels * meta_->pageCount * 4)
@@ -213,7 +235,7 @@ Status PackReader::open(const std::string& path) {
   for (uint32_t i = 0; i < meta_->cellCount; ++i) {
     const CellRecord& c = cells_[i];
     if (c.page >= meta_->pageCount || c.tileW == 0 || c.tileH == 0 || c.tileX < 1 || c.tileY < 1 ||
-        uint64_t(c.tileX) + c.tileW + 1 > P || uint64_t(c.tileY) + c.tileH + 1 > P)
+        uint64_t(c.tileX) + c.tileW + 1 > P || uint64_t(c.tileY) + c.tileH + 1 > PH)
       return Status::badInput(path + ": cell " + std::to_string(i) + " has a tile outside its page");
     for (double d : c.box)
       if (!std::isfinite(d)) return Status::badInput(path + ": cell " + std::to_string(i) + " has a non-finite box");
@@ -232,12 +254,14 @@ Status PackReader::verifyPages() const {
   return Status::ok();
 }
 
-const uint16_t* PackReader::heightPage(uint32_t page) const {
-  return hght_ + uint64_t(page) * meta_->pageSize * meta_->pageSize;
-}
+const uint16_t* PackReader::heightPage(uint32_t page) const { return hght_ + uint64_t(page) * pageTexels(); }
 
 const uint8_t* PackReader::colorPage(uint32_t page) const {
-  return colr_ ? colr_ + uint64_t(page) * meta_->pageSize * meta_->pageSize * 4 : nullptr;
+  return colr_ ? colr_ + uint64_t(page) * pageTexels() * 4 : nullptr;
+}
+
+const uint8_t* PackReader::normalPage(uint32_t page) const {
+  return nrml_ ? nrml_ + uint64_t(page) * pageTexels() * 2 : nullptr;
 }
 
 std::string PackReader::note() const {

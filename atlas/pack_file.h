@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "atlas/pack_format.h"
 #include "common/error.h"
 #include "common/fileio.h"
@@ -19,9 +21,10 @@ class PackWriter {
   // `cells` must already carry their tile placements; `meta` the page size and count.
   Status open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
               const std::string& note);
-  // Writes one tile (tileW x tileH, row-major) and its gutter. `rgba` may be null when the
-  // pack has no colour. Thread-safe for different cells.
-  Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* rgba);
+  // Writes one tile (tileW x tileH, row-major) and its gutter: heights, encoded normals (2 bytes
+  // per texel; may be null when the pack has no normal pages) and colours (4 bytes; may be null
+  // when the pack has no colour). Thread-safe for different cells.
+  Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
   // Widens a cell's height range before its tile is written (not thread-safe for the same
   // cell; different cells may be updated concurrently).
   void setCellHeights(uint32_t cellIndex, double wMin, double wMax) {
@@ -43,7 +46,7 @@ class PackWriter {
   PackMeta meta_{};
   std::vector<CellRecord> cells_;
   std::string note_;
-  uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
+  uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
 };
 
 class PackReader {
@@ -63,14 +66,25 @@ class PackReader {
   const PackMeta& meta() const { return *meta_; }
   std::span<const CellRecord> cells() const { return {cells_, meta_->cellCount}; }
   const uint16_t* heightPage(uint32_t page) const;
-  const uint8_t* colorPage(uint32_t page) const;  // null when the pack has no colour
+  const uint8_t* colorPage(uint32_t page) const;   // null when the pack has no colour
+  const uint8_t* normalPage(uint32_t page) const;  // null when the pack has no normal pages
   bool hasColor() const { return colr_ != nullptr; }
+  bool hasNormals() const { return nrml_ != nullptr; }
+  uint64_t pageTexels() const { return uint64_t(meta_->pageWidth) * meta_->pageHeight; }
+  // The pack's up axis (unit, world), or zero when unknown.
+  Eigen::Vector3d up() const { return Eigen::Vector3d(meta_->up[0], meta_->up[1], meta_->up[2]); }
+  // The default up of every view: the pack's, else +y.
+  Eigen::Vector3d viewUp() const { return up().norm() > 0.5 ? Eigen::Vector3d(up().normalized()) : Eigen::Vector3d::UnitY(); }
   uint64_t fileBytes() const { return size_; }
   std::string note() const;
 
   // Height of cell c at texel (i, j) of its tile (0 = uncovered).
   uint16_t texel(const CellRecord& c, int i, int j) const {
-    return heightPage(c.page)[(size_t)(c.tileY + j) * meta_->pageSize + (c.tileX + i)];
+    return heightPage(c.page)[(size_t)(c.tileY + j) * meta_->pageWidth + (c.tileX + i)];
+  }
+  // Encoded normal of cell c at texel (i, j) (2 bytes; FORMAT.md); needs hasNormals().
+  const uint8_t* normalTexel(const CellRecord& c, int i, int j) const {
+    return normalPage(c.page) + 2 * ((size_t)(c.tileY + j) * meta_->pageWidth + (c.tileX + i));
   }
 
  private:
@@ -84,6 +98,7 @@ class PackReader {
   const CellRecord* cells_ = nullptr;
   const uint16_t* hght_ = nullptr;
   const uint8_t* colr_ = nullptr;
+  const uint8_t* nrml_ = nullptr;
 };
 
 }  // namespace sa

@@ -29,14 +29,80 @@ double CpuRaycaster::height(const CellRecord& c, double u, double v) const {
   const double fy = std::clamp((v - c.box[2]) / (c.box[3] - c.box[2]) * c.tileH - 0.5, -0.5, c.tileH - 0.5);
   const int i0 = int(std::floor(fx)), j0 = int(std::floor(fy));
   const double ax = fx - i0, ay = fy - j0;
-  const double h00 = texelHeight(c, i0, j0), h10 = texelHeight(c, i0 + 1, j0);
-  const double h01 = texelHeight(c, i0, j0 + 1), h11 = texelHeight(c, i0 + 1, j0 + 1);
-  if (std::isnan(h00) || std::isnan(h10) || std::isnan(h01) || std::isnan(h11)) {
+  double h[4] = {texelHeight(c, i0, j0), texelHeight(c, i0 + 1, j0), texelHeight(c, i0, j0 + 1), texelHeight(c, i0 + 1, j0 + 1)};
+  if (std::isnan(h[0]) || std::isnan(h[1]) || std::isnan(h[2]) || std::isnan(h[3])) {
+    // As the shader's sampleHeight: the nearest texel decides coverage; uncovered neighbours
+    // take its tangent plane (stored normal), so a coverage edge is not a flat step.
     const int ni = std::clamp(int(std::floor(fx + 0.5)), 0, int(c.tileW) - 1);
     const int nj = std::clamp(int(std::floor(fy + 0.5)), 0, int(c.tileH) - 1);
-    return texelHeight(c, ni, nj);
+    const double hn = texelHeight(c, ni, nj);
+    if (std::isnan(hn) || !pack_.hasNormals()) return hn;
+    double n[3];
+    decodeNormal(pack_.normalTexel(c, ni, nj), n);
+    const double gu = -n[0] / std::max(n[2], 0.05), gv = -n[1] / std::max(n[2], 0.05);
+    const double tu = (c.box[1] - c.box[0]) / c.tileW, tv = (c.box[3] - c.box[2]) / c.tileH;
+    for (int k = 0; k < 4; ++k)
+      if (std::isnan(h[k])) h[k] = hn + gu * (i0 + (k & 1) - ni) * tu + gv * (j0 + (k >> 1) - nj) * tv;
   }
-  return (h00 * (1 - ax) + h10 * ax) * (1 - ay) + (h01 * (1 - ax) + h11 * ax) * ay;
+  return (h[0] * (1 - ax) + h[1] * ax) * (1 - ay) + (h[2] * (1 - ax) + h[3] * ax) * ay;
+}
+
+// The shader's rule (marchHeightField in heightfield.glsl) at a quarter texel: a hit is a
+// crossing from above to below inside the covered region; entering it already below is the
+// side of the sheet, not a surface; leaving it, the crossing may lie before the edge.
+bool CpuRaycaster::march(const CellRecord& c, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
+                         double dt, double& tHit) const {
+  auto gap = [&](double t, bool& covered) {
+    const Eigen::Vector3d p = o + d * t;
+    const double h = height(c, p.x(), p.y());
+    covered = !std::isnan(h);
+    return covered ? p.z() - h : 0.0;
+  };
+  auto edge = [&](double tOut, double tIn) {  // a covered t next to the coverage edge
+    for (int k = 0; k < 60; ++k) {
+      const double m = 0.5 * (tOut + tIn);
+      bool cov;
+      gap(m, cov);
+      (cov ? tIn : tOut) = m;
+    }
+    return tIn;
+  };
+  bool covPrev;
+  double tp = t0, gp = gap(t0, covPrev);
+  double lo = 0, hi = 0;
+  bool found = false;
+  for (double t = t0 + dt;; t += dt) {
+    const bool last = t >= t1;
+    if (last) t = t1;
+    bool cov;
+    const double gt = gap(t, cov);
+    if (cov && gt <= 0) {
+      if (covPrev && gp > 0) {
+        lo = tp, hi = t, found = true;
+      } else if (!covPrev) {
+        const double te = edge(tp, t);
+        bool ce;
+        if (gap(te, ce) > 0) lo = te, hi = t, found = true;
+      }
+    } else if (!cov && covPrev && gp > 0) {
+      const double te = edge(t, tp);
+      bool ce;
+      if (gap(te, ce) <= 0) lo = tp, hi = te, found = true;
+    }
+    if (found || last) break;
+    tp = t;
+    gp = gt;
+    covPrev = cov;
+  }
+  if (!found) return false;
+  for (int k = 0; k < 60; ++k) {
+    const double m = 0.5 * (lo + hi);
+    bool cov;
+    const double g = gap(m, cov);
+    (!cov || g > 0 ? lo : hi) = m;
+  }
+  tHit = hi;
+  return true;
 }
 
 RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd) const {
@@ -68,32 +134,11 @@ RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd) 
     const double texel = std::min((c.box[1] - c.box[0]) / c.tileW, (c.box[3] - c.box[2]) / c.tileH);
     const double horiz = std::max(1e-300, std::hypot(d.x(), d.y()));
     const double dt = std::min((t1 - t0) / 16, 0.25 * texel / horiz);
-    auto g = [&](double t) {
-      const Eigen::Vector3d p = o + d * t;
-      const double h = height(c, p.x(), p.y());
-      return std::isnan(h) ? std::numeric_limits<double>::infinity() : p.z() - h;  // uncovered: "above"
-    };
-    double tp = t0, gp = g(t0);
-    for (double t = t0 + dt;; t += dt) {
-      const bool last = t >= t1;
-      if (last) t = t1;
-      const double gt = g(t);
-      if (gp > 0 && gt <= 0) {
-        double lo = tp, hi = t;
-        for (int k = 0; k < 60; ++k) {
-          const double m = 0.5 * (lo + hi);
-          (g(m) > 0 ? lo : hi) = m;
-        }
-        if (hi < best.t) {
-          best.hit = true;
-          best.t = hi;
-          best.cell = ci;
-        }
-        break;
-      }
-      tp = t;
-      gp = gt;
-      if (last) break;
+    double t;
+    if (march(c, o, d, t0, t1, dt, t) && t < best.t) {
+      best.hit = true;
+      best.t = t;
+      best.cell = ci;
     }
   }
   return best;

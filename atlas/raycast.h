@@ -1,7 +1,7 @@
 // Reference ray caster on the CPU, in double precision: the same height fields, the same
 // sampling rule (bilinear; the nearest texel where a neighbour is uncovered) and the same
-// one-sided surface as the GPU shader, but marched at a quarter texel and bisected to
-// convergence. Used to check the GPU render and for picking.
+// one-sided surface, covered only where the tile says so (no hit through the side of a sheet), as
+// the GPU shader, but marched at a quarter texel and bisected to convergence. Used to check the GPU render and for picking.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -28,6 +28,9 @@ class CpuRaycaster {
 
  private:
   double texelHeight(const CellRecord& c, int i, int j) const;
+  // Marches cell c's height field along o + t d (frame coordinates) over [t0, t1].
+  bool march(const CellRecord& c, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1, double dt,
+             double& tHit) const;
   const PackReader& pack_;
   std::vector<Eigen::Vector3d> centers_;
   std::vector<double> radii_;

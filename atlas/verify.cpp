@@ -1,6 +1,7 @@
 #include "atlas/verify.h"
 
 #include <cmath>
+#include <cstring>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -17,9 +18,9 @@ VerifyReport verifyPack(const PackReader& pack) {
   if (!s) problem(s.message());
   r.sectionsChecked = 1;
   const PackMeta& m = pack.meta();
-  const uint32_t P = m.pageSize;
+  const uint32_t P = m.pageWidth;
   // One bit per page texel: tiles with their gutters must not overlap.
-  std::vector<std::vector<uint8_t>> used(m.pageCount, std::vector<uint8_t>(size_t(P) * P / 8 + 1, 0));
+  std::vector<std::vector<uint8_t>> used(m.pageCount, std::vector<uint8_t>(size_t(P) * m.pageHeight / 8 + 1, 0));
   uint64_t points = 0;
   auto cells = pack.cells();
   for (uint32_t i = 0; i < cells.size(); ++i) {
@@ -53,15 +54,17 @@ VerifyReport verifyPack(const PackReader& pack) {
         if (j >= 0 && j < int(c.tileH) && k >= 0 && k < int(c.tileW)) continue;
         const int sj = std::clamp(j, 0, int(c.tileH) - 1), sk = std::clamp(k, 0, int(c.tileW) - 1);
         ++r.texelsChecked;
-        if (pack.texel(c, k, j) != pack.texel(c, sk, sj)) {
+        if (pack.texel(c, k, j) != pack.texel(c, sk, sj) ||
+            (pack.hasNormals() && std::memcmp(pack.normalTexel(c, k, j), pack.normalTexel(c, sk, sj), 2) != 0)) {
           problem(name + ": gutter texel " + std::to_string(k) + "," + std::to_string(j) + " differs from its edge");
           gutterOk = false;
           break;
         }
       }
   }
-  if (points != m.sourcePoints)
-    problem("cells hold " + std::to_string(points) + " points but META counts " + std::to_string(m.sourcePoints));
+  if (points + m.outliersRemoved != m.sourcePoints)
+    problem("cells hold " + std::to_string(points) + " points and " + std::to_string(m.outliersRemoved) +
+            " were removed as outliers, but META counts " + std::to_string(m.sourcePoints) + " source points");
   return r;
 }
 

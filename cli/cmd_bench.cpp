@@ -28,7 +28,7 @@ const char* kHelp =
     "  --zoom F               orbit cameras F times closer (F > 1: close-ups, frustum culling\n"
     "                         matters; F < 1: far away, boxes shrink below a pixel)\n"
     "  --size WxH             frame size (default 1024x1024)\n"
-    "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and 0,1,0)\n"
+    "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and the pack's up axis)\n"
     "  --warmup N             frames rendered before timing each configuration (default 10)\n"
     "  --frames N             timed frames per configuration (default 200)\n"
     "  --mode LIST            parallax, points (the source points as splats; reads the pack's\n"

@@ -34,7 +34,9 @@ const char* kHelp =
     "  --max-edge dropped). Per view and configuration: coverage IoU, silhouette error (pixels\n"
     "  whose coverage differs / reference silhouette perimeter), depth error median and p95\n"
     "  relative to the bounding-box diagonal, normal angular error median, PSNR of the shaded\n"
-    "  image (both shaded alike: Lambert, head light, no scan colour), and the frame time.\n"
+    "  image (both shaded alike: Lambert, head light, no scan colour), interior holes (pixels\n"
+    "  where the reference has surface on the pixel and its 8 neighbours and the render has\n"
+    "  none: pinholes and seams), and the frame time.\n"
     "\n"
     "  reference-free (--far, and always when no --reference is given): for every rendered\n"
     "  surface pixel, the 3-D distance from its hit point to the nearest input point (a kd-tree\n"
@@ -87,6 +89,7 @@ struct Row {
   double frameMs = 0;
   bool hasRef = false;
   double iou = 0, iouMin = 1, sil = 0, depthMed = 0, depthP95 = 0, normalMed = -1, psnr = 0;
+  size_t holes = 0;
   std::optional<FarStats> far;
   std::vector<ViewResult> views;
 };
@@ -167,6 +170,7 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
       iouSum += vr.ref->iou;
       silSum += vr.ref->silhouetteError;
       row.iouMin = std::min(row.iouMin, vr.ref->iou);
+      row.holes += vr.ref->interiorHoles;
       vr.ref->depthErrors.clear();
       vr.ref->normalErrors.clear();
     }
@@ -201,12 +205,12 @@ std::string fmtNormal(double deg) { return deg < 0 ? "-" : std::to_string(deg).s
 void printFigures(const char* label, double ms, const Row* sum, const ViewResult* view) {
   std::fprintf(stderr, "%-26s %9.2f", label, ms);
   if (sum && sum->hasRef)
-    std::fprintf(stderr, " %8.4f %8.4f %7.3f %11.5f %11.4f %9s %7.2f", sum->iou, sum->iouMin, sum->sil,
-                 100 * sum->depthMed, 100 * sum->depthP95, fmtNormal(sum->normalMed).c_str(), sum->psnr);
+    std::fprintf(stderr, " %8.4f %8.4f %7.3f %11.5f %11.4f %9s %7.2f %7zu", sum->iou, sum->iouMin, sum->sil,
+                 100 * sum->depthMed, 100 * sum->depthP95, fmtNormal(sum->normalMed).c_str(), sum->psnr, sum->holes);
   if (view && view->ref)
-    std::fprintf(stderr, " %8.4f %8s %7.3f %11.5f %11.4f %9s %7.2f", view->ref->iou, "", view->ref->silhouetteError,
+    std::fprintf(stderr, " %8.4f %8s %7.3f %11.5f %11.4f %9s %7.2f %7zu", view->ref->iou, "", view->ref->silhouetteError,
                  100 * view->ref->depthMedian, 100 * view->ref->depthP95, fmtNormal(view->ref->normalMedianDeg).c_str(),
-                 view->ref->psnr);
+                 view->ref->psnr, view->ref->interiorHoles);
   const std::optional<FarStats>& far = sum ? sum->far : view->far;
   if (far)
     std::fprintf(stderr, " %8.3f %8.3f %9.4f %9.4f", far->median, far->p99, 100 * far->beyond3, 100 * far->beyond10);
@@ -216,8 +220,8 @@ void printFigures(const char* label, double ms, const Row* sum, const ViewResult
 void printHeader(const char* first, bool ref, bool far) {
   std::fprintf(stderr, "%-26s %9s", first, "frame ms");
   if (ref)
-    std::fprintf(stderr, " %8s %8s %7s %11s %11s %9s %7s", "IoU", "IoU min", "silh.", "depth med%", "depth p95%",
-                 "normal°", "PSNR dB");
+    std::fprintf(stderr, " %8s %8s %7s %11s %11s %9s %7s %7s", "IoU", "IoU min", "silh.", "depth med%", "depth p95%",
+                 "normal°", "PSNR dB", "holes");
   if (far) std::fprintf(stderr, " %8s %8s %9s %9s", "far med", "far p99", ">3 sp %", ">10 sp %");
   std::fprintf(stderr, "\n");
 }
@@ -261,17 +265,19 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
                 r.frameMs);
     if (r.hasRef)
       std::printf(", \"iou\": %.6f, \"iou_min\": %.6f, \"silhouette_error\": %.6f, \"depth_median\": %.8g, "
-                  "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f",
+                  "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f, \"interior_holes\": %zu",
                   r.iou, r.iouMin, r.sil, r.depthMed, r.depthP95,
-                  r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr);
+                  r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr, r.holes);
     std::printf(", \"far\": %s, \"per_view\": [", farJson(r.far).c_str());
     for (size_t v = 0; v < r.views.size(); ++v) {
       const ViewResult& vr = r.views[v];
       std::printf("%s{\"view\": %zu, \"frame_ms\": %.4f", v ? ", " : "", v, vr.ms);
       if (vr.ref)
-        std::printf(", \"iou\": %.6f, \"depth_median\": %.8g, \"depth_p95\": %.8g, \"normal_median_deg\": %s",
+        std::printf(", \"iou\": %.6f, \"depth_median\": %.8g, \"depth_p95\": %.8g, \"normal_median_deg\": %s, "
+                    "\"interior_holes\": %zu",
                     vr.ref->iou, vr.ref->depthMedian, vr.ref->depthP95,
-                    vr.ref->normalMedianDeg < 0 ? "null" : std::to_string(vr.ref->normalMedianDeg).c_str());
+                    vr.ref->normalMedianDeg < 0 ? "null" : std::to_string(vr.ref->normalMedianDeg).c_str(),
+                    vr.ref->interiorHoles);
       std::printf(", \"far\": %s}", farJson(vr.far).c_str());
     }
     std::printf("]}");
@@ -282,7 +288,7 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
 std::string csvText(const std::vector<Row>& rows, const PackReader& pack) {
   std::ostringstream csv;
   csv << "pack,mode,iterations,skips,view,frame_ms,iou,silhouette_error,depth_median,depth_p95,normal_median_deg,psnr,"
-         "far_median,far_p99,far_beyond3,far_beyond10\n";
+         "interior_holes,far_median,far_p99,far_beyond3,far_beyond10\n";
   auto farCols = [&](const std::optional<FarStats>& f) {
     if (!f) return std::string(",,,");
     std::ostringstream s;
@@ -296,16 +302,17 @@ std::string csvText(const std::vector<Row>& rows, const PackReader& pack) {
       csv << head << v << "," << vr.ms << ",";
       if (vr.ref)
         csv << vr.ref->iou << "," << vr.ref->silhouetteError << "," << vr.ref->depthMedian << "," << vr.ref->depthP95
-            << "," << vr.ref->normalMedianDeg << "," << vr.ref->psnr << ",";
+            << "," << vr.ref->normalMedianDeg << "," << vr.ref->psnr << "," << vr.ref->interiorHoles << ",";
       else
-        csv << ",,,,,,";
+        csv << ",,,,,,,";
       csv << farCols(vr.far) << "\n";
     }
     csv << head << "all," << r.frameMs << ",";
     if (r.hasRef)
-      csv << r.iou << "," << r.sil << "," << r.depthMed << "," << r.depthP95 << "," << r.normalMed << "," << r.psnr << ",";
+      csv << r.iou << "," << r.sil << "," << r.depthMed << "," << r.depthP95 << "," << r.normalMed << "," << r.psnr << ","
+          << r.holes << ",";
     else
-      csv << ",,,,,,";
+      csv << ",,,,,,,";
     csv << farCols(r.far) << "\n";
   }
   return csv.str();

@@ -156,7 +156,9 @@ int cmdInfo(int argc, char** argv) {
     degenerate += (c.flags & kCellDegenerate) != 0;
     tileTexels += uint64_t(c.tileW) * c.tileH;
   }
-  const uint64_t pageTexels = uint64_t(m.pageSize) * m.pageSize * m.pageCount;
+  const uint64_t pageTexels = pack.pageTexels() * m.pageCount;
+  const char* upFrom[4] = {"unknown", "given", "format convention", "estimated from the data"};
+  const char* upSource = upFrom[std::min<uint32_t>(m.upSource, 3)];
   double bmin[3], bmax[3];
   for (int i = 0; i < 3; ++i) {
     bmin[i] = m.origin[i] + m.boundsMin[i];
@@ -172,14 +174,17 @@ int cmdInfo(int argc, char** argv) {
       std::printf("%s\"%d\": %u", first ? "" : ", ", l, n);
       first = false;
     }
-    std::printf("}, \"texels\": %llu, \"page_size\": %u, \"pages\": %u, \"atlas_occupancy\": %.4f, "
+    std::printf("}, \"texels\": %llu, \"page_width\": %u, \"page_height\": %u, \"pages\": %u, \"atlas_occupancy\": %.4f, "
                 "\"texel_size\": %.9g, \"sample_spacing\": %.9g, \"source_points\": %llu, \"skipped_points\": %llu, "
-                "\"source_triangles\": %llu, \"color\": %s, \"bytes_per_point\": %.3f, "
+                "\"outliers_removed\": %llu, \"source_triangles\": %llu, \"color\": %s, \"normals\": %s, "
+                "\"up\": [%.9g, %.9g, %.9g], \"up_source\": \"%s\", \"bytes_per_point\": %.3f, "
                 "\"origin\": [%.17g, %.17g, %.17g], \"bounds_min\": [%.17g, %.17g, %.17g], "
                 "\"bounds_max\": [%.17g, %.17g, %.17g], \"seconds\": {",
-                (unsigned long long)tileTexels, m.pageSize, m.pageCount, double(tileTexels) / double(pageTexels),
+                (unsigned long long)tileTexels, m.pageWidth, m.pageHeight, m.pageCount, double(tileTexels) / double(pageTexels),
                 m.texelSize, m.sampleSpacing, (unsigned long long)m.sourcePoints, (unsigned long long)m.skippedPoints,
-                (unsigned long long)m.sourceTriangles, pack.hasColor() ? "true" : "false",
+                (unsigned long long)m.outliersRemoved, (unsigned long long)m.sourceTriangles,
+                pack.hasColor() ? "true" : "false", pack.hasNormals() ? "true" : "false", m.up[0], m.up[1], m.up[2],
+                upSource,
                 double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)), m.origin[0], m.origin[1],
                 m.origin[2], bmin[0], bmin[1], bmin[2], bmax[0], bmax[1], bmax[2]);
     for (int i = 0; i < 6; ++i) std::printf("%s\"%s\": %.3f", i ? ", " : "", phases[i], m.seconds[i]);
@@ -188,17 +193,20 @@ int cmdInfo(int argc, char** argv) {
   }
   std::printf("pack      %s (%.2f MiB, format version %u)\n", pack.path().c_str(), pack.fileBytes() / 1048576.0,
               kPackVersion);
-  std::printf("source    %llu points (%llu NaN/Inf skipped), %llu triangles, %s, %s\n",
+  std::printf("source    %llu points (%llu NaN/Inf skipped, %llu outliers removed), %llu triangles, %s, %s, %s\n",
               (unsigned long long)m.sourcePoints, (unsigned long long)m.skippedPoints,
-              (unsigned long long)m.sourceTriangles, (m.flags & kPackFromTriangles) ? "heights rasterized" : "heights by pull-push",
+              (unsigned long long)m.outliersRemoved, (unsigned long long)m.sourceTriangles,
+              (m.flags & kPackFromTriangles) ? "heights rasterized" : "heights by pull-push",
+              pack.hasNormals() ? "stored normals" : "normals from height gradients",
               pack.hasColor() ? "with colour" : "no colour");
+  std::printf("up        %.4g, %.4g, %.4g (%s)\n", m.up[0], m.up[1], m.up[2], upSource);
   std::printf("bounds    [%.6f, %.6f, %.6f] .. [%.6f, %.6f, %.6f]\n", bmin[0], bmin[1], bmin[2], bmax[0], bmax[1], bmax[2]);
   std::printf("cells     %u (%u forced, %u degenerate), %u chunk(s)\n", m.cellCount, forced, degenerate, m.chunkCount);
   std::printf("levels   ");
   for (auto [l, n] : perLevel) std::printf(" L%d:%u", l, n);
   std::printf("\n");
-  std::printf("texels    %llu in %u page(s) of %u^2 (occupancy %.1f%%), texel %.4g, sample spacing %.4g\n",
-              (unsigned long long)tileTexels, m.pageCount, m.pageSize, 100.0 * double(tileTexels) / double(pageTexels),
+  std::printf("texels    %llu in %u page(s) of %ux%u (occupancy %.1f%%), texel %.4g, sample spacing %.4g\n",
+              (unsigned long long)tileTexels, m.pageCount, m.pageWidth, m.pageHeight, 100.0 * double(tileTexels) / double(pageTexels),
               m.texelSize, m.sampleSpacing);
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
   std::printf("timings  ");

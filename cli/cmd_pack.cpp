@@ -1,5 +1,6 @@
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -33,8 +34,21 @@ const char* kHelp =
     "  --max-depth N          deepest octree level (default 10; the paper uses 6-10)\n"
     "  --max-angle DEG        height-field test: largest angle between a normal and the cell's\n"
     "                         plane normal (default 85; the paper's test is 90)\n"
-    "  --coverage R           texels farther than R sample spacings from every point stay empty,\n"
-    "                         so holes and scan edges stay open (default 1.5)\n"
+    "  --coverage R           a texel is empty unless its surface point lies within R sample\n"
+    "                         spacings of an input point (in 3-D: holes, scan edges and height\n"
+    "                         jumps such as roof to ground stay open) (default 1.5)\n"
+    "  --splat R              point inputs: each point spreads over R sample spacings with a\n"
+    "                         smooth kernel (default 1; 0 = bilinear onto the nearest texels)\n"
+    "  --no-smooth            point inputs: keep the points where they are (default: moved onto\n"
+    "                         their moving-least-squares surface where the neighbourhood is one,\n"
+    "                         which averages out the noise of merged scans)\n"
+    "  --outlier-ratio F      point inputs: a point whose mean distance to its 8 nearest\n"
+    "                         neighbours is F times the median of its neighbours' is removed as an\n"
+    "                         outlier (default 3; 0 keeps every point)\n"
+    "  --up X,Y,Z             the scan's up axis, stored in the pack as every view's default\n"
+    "                         (default: the format's convention - LAS +z, Stanford scan sets +y,\n"
+    "                         an organized PCD's camera -y refined to its floor or table - else\n"
+    "                         from the data, e.g. terrain's thin axis, else +y; STL +z)\n"
     "  --outliers F           fraction of a cell's points whose normal may fail the test (default\n"
     "                         0.01: estimated normals are noisy; 0 is the paper's strict test)\n"
     "  --min-split N          cells with fewer points are not split further (default 32)\n"
@@ -51,14 +65,20 @@ const char* kHelp =
     "  -q, --quiet            no progress and no summary\n";
 
 
+const char* upSourceName(uint32_t s) {
+  const char* names[4] = {"unknown", "given", "the format's convention", "estimated from the data"};
+  return names[std::min<uint32_t>(s, 3)];
+}
+
 }  // namespace
 
 int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
-                      "neighbours", "scratch", "outliers", "min-split", "columns"},
-                     {"as-points", "strict", "force", "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up"},
+                     {"as-points", "strict", "force", "no-smooth", "json", "quiet", "help"},
+                     {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
     return 0;
@@ -118,6 +138,25 @@ int cmdPack(int argc, char** argv) {
     if (!v) return reportError(v.status());
     opt.normalNeighbours = static_cast<int>(*v);
   }
+  if (a.has("splat")) {
+    auto v = parseNumber("splat", a.get("splat"));
+    if (!v) return reportError(v.status());
+    if (*v < 0 || *v > 100) return reportError(Status::badInput("--splat must be in [0, 100]"));
+    opt.splatRadius = *v;
+  }
+  if (a.has("outlier-ratio")) {
+    auto v = parseNumber("outlier-ratio", a.get("outlier-ratio"));
+    if (!v) return reportError(v.status());
+    if (*v != 0 && *v < 1.5) return reportError(Status::badInput("--outlier-ratio must be 0 (off) or at least 1.5"));
+    opt.outlierRatio = *v;
+  }
+  if (a.has("up")) {
+    auto v = parseVec3("up", a.get("up"));
+    if (!v) return reportError(v.status());
+    if (!(v->norm() > 0)) return reportError(Status::badInput("--up must not be zero"));
+    opt.up = v->normalized();
+  }
+  opt.smooth = !a.flag("no-smooth");
   opt.asPoints = a.flag("as-points");
   opt.strict = a.flag("strict");
   opt.force = a.flag("force");
@@ -136,19 +175,26 @@ int cmdPack(int argc, char** argv) {
   s = packInput(*input, out, opt, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
   progress.finish();
   if (!s) return reportError(s);
+  for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
+    if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
   if (sum.upToDate && !quiet && !a.flag("json"))
     std::fprintf(stderr, "%s is up to date (same input bytes and options, hash %016llx, checked in %.2fs); --force repacks\n",
                  out.c_str(), (unsigned long long)sum.inputHash, sum.seconds[5]);
   if (a.flag("json")) {
     std::printf("{\"output\": \"%s\", \"points\": %llu, \"skipped_points\": %llu, \"triangles\": %llu, \"cells\": %u, "
-                "\"forced_cells\": %u, \"degenerate_cells\": %u, \"chunks\": %u, \"pages\": %u, \"page_size\": %u, "
-                "\"texels\": %llu, \"texel_size\": %.9g, \"sample_spacing\": %.9g, \"bytes\": %llu, "
+                "\"forced_cells\": %u, \"degenerate_cells\": %u, \"layered_cells\": %u, \"outliers_removed\": %llu, "
+                "\"surface_samples\": %llu, "
+                "\"chunks\": %u, \"pages\": %u, \"page_width\": %u, \"page_height\": %u, "
+                "\"texels\": %llu, \"texel_size\": %.9g, \"sample_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
+                "\"up_source\": \"%s\", \"bytes\": %llu, "
                 "\"bytes_per_point\": %.3f, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
                 "\"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
-                (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.chunks,
-                sum.pages, sum.pageSize, (unsigned long long)sum.texels, sum.texelSize, sum.spacing,
+                (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.layeredCells,
+                (unsigned long long)sum.outliersRemoved, (unsigned long long)sum.surfaceSamples, sum.chunks, sum.pages, sum.pageWidth, sum.pageHeight,
+                (unsigned long long)sum.texels, sum.texelSize, sum.spacing, sum.up.x(), sum.up.y(), sum.up.z(),
+                upSourceName(sum.upSource),
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
                 sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
                 sum.hasColor ? "true" : "false");
@@ -158,15 +204,19 @@ int cmdPack(int argc, char** argv) {
                 sum.seconds[0], sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], sum.seconds[5], mpts);
   } else if (!quiet && !sum.upToDate) {
     std::fprintf(stderr,
-                 "packed %s: %llu points%s -> %u cells (%u forced), %u chunk(s)\n"
-                 "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %u^2, %s%s\n"
+                 "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
+                 "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
+                 "  up %.3g,%.3g,%.3g (%s)\n"
                  "  file %.1f MiB (%.1f bytes/point)\n"
                  "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n",
                  out.c_str(), (unsigned long long)sum.pointsRead,
                  sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
-                 sum.cells, sum.forcedCells, sum.chunks, (unsigned long long)sum.texels, sum.texelSize, sum.spacing,
-                 sum.pages, sum.pageSize, sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
-                 sum.normalsEstimated ? ", normals estimated" : "", sum.fileBytes / 1048576.0,
+                 sum.outliersRemoved ? (" (" + std::to_string(sum.outliersRemoved) + " outliers removed)").c_str() : "",
+                 sum.cells, sum.forcedCells, sum.layeredCells, sum.chunks, (unsigned long long)sum.texels, sum.texelSize,
+                 sum.spacing, sum.pages, sum.pageWidth, sum.pageHeight,
+                 sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
+                 sum.normalsEstimated ? ", normals estimated" : "", sum.up.x(), sum.up.y(), sum.up.z(),
+                 upSourceName(sum.upSource), sum.fileBytes / 1048576.0,
                  double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.seconds[5], sum.seconds[0],
                  sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts);
   }

@@ -54,6 +54,7 @@ Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, 
                        std::vector<Camera>& out) {
   Camera base;
   base.width = base.height = defaultSize;
+  base.up = pack.viewUp();
   if (a.has("size")) SA_RETURN_IF_ERROR(parseWxH("size", a.get("size"), base.width, base.height));
   if (a.has("fov")) {
     auto v = parseNumber("fov", a.get("fov"));

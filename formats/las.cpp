@@ -71,8 +71,11 @@ Result<LasHeader> readLasHeader(const std::string& path) {
   L.colorOffset = kRgbOffset[L.pointFormat];
   L.hasColor = L.colorOffset >= 0;
   if (L.hasColor && L.pointCount > 0) {
-    // Sample up to 4096 records spread over the file: all channels <= 255 means 8-bit colour.
+    // Sample up to 4096 records spread over the file: all channels <= 255 means 8-bit colour;
+    // every sample the same colour (all zero, typically) means no colour at all.
     uint16_t maxc = 0;
+    bool varies = false;
+    uint16_t first[3] = {0, 0, 0};
     std::FILE* f = std::fopen(path.c_str(), "rb");
     if (!f) return Status::badInput(path + ": cannot reopen");
     std::vector<uint8_t> rec(L.recordLength);
@@ -80,10 +83,20 @@ Result<LasHeader> readLasHeader(const std::string& path) {
     for (uint64_t k = 0; k < samples; ++k) {
       const uint64_t i = k * L.pointCount / samples;
       if (fseeko(f, off_t(L.dataOffset + i * L.recordLength), SEEK_SET) != 0 || std::fread(rec.data(), 1, rec.size(), f) != rec.size()) break;
-      for (int c = 0; c < 3; ++c) maxc = std::max(maxc, get<uint16_t>(rec.data() + L.colorOffset + 2 * c));
+      for (int c = 0; c < 3; ++c) {
+        const uint16_t v = get<uint16_t>(rec.data() + L.colorOffset + 2 * c);
+        maxc = std::max(maxc, v);
+        if (k == 0) first[c] = v;
+        varies |= v != first[c];
+      }
     }
     std::fclose(f);
     L.color8bit = maxc <= 255;
+    if (!varies) {
+      L.hasColor = false;
+      std::copy(first, first + 3, L.constantColor);
+      L.colorConstant = true;
+    }
   }
   return L;
 }

@@ -20,6 +20,10 @@ struct LasHeader {
   double min[3] = {0, 0, 0}, max[3] = {0, 0, 0};
   bool hasColor = false;
   bool color8bit = false;  // 8-bit values stored in the 16-bit fields
+  // The point format has RGB fields but every sampled record holds the same values (all zero,
+  // typically): hasColor is then false and these are the values.
+  bool colorConstant = false;
+  uint16_t constantColor[3] = {0, 0, 0};
   int colorOffset = -1;    // byte offset of RGB in the record
 };
 

@@ -49,6 +49,11 @@ Status addLas(const std::string& path, std::vector<InputFile>& out, bool& terrai
   f.hasClassification = true;
   f.detail = "LAS " + std::to_string(h->versionMajor) + "." + std::to_string(h->versionMinor) + ", point format " +
              std::to_string(h->pointFormat) + (h->hasColor ? (h->color8bit ? ", 8-bit colour in 16-bit fields" : ", 16-bit colour") : "");
+  if (h->colorConstant)
+    f.detail += ", RGB fields all " + std::to_string(h->constantColor[0]) + "," + std::to_string(h->constantColor[1]) + "," +
+                std::to_string(h->constantColor[2]) + " (no colour)";
+  f.up = Eigen::Vector3d::UnitZ();  // georeferenced: z up
+  f.upIsConvention = true;
   out.push_back(f);
   return Status::ok();
 }
@@ -118,10 +123,13 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
         f.translation = s.translation;
         f.scanIndex = static_cast<int>(set.towardScanner_.size());
         f.hasFaces = false;  // range grids are not triangles
+        f.up = Eigen::Vector3d::UnitY();  // Stanford's scans are y-up
+        f.upIsConvention = true;
         set.towardScanner_.push_back(s.towardScanner);
       }
     } else if (ext == ".ply") {
       SA_RETURN_IF_ERROR(addPly(path, set.files_, set.warnings_));
+      set.files_.back().up = Eigen::Vector3d::UnitY();
     } else if (ext == ".las" || ext == ".laz") {
       bool terrainLike = false;
       SA_RETURN_IF_ERROR(addLas(path, set.files_, terrainLike));
@@ -145,6 +153,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       f.hasColors = rec->anyColors();
       f.hasFaces = rec->triangles() > 0;
       f.recording = std::move(rec);
+      f.up = ext == ".stl" ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitY();  // STL comes from CAD: z up
       set.files_.push_back(f);
     } else if (ext == ".pcd") {
       auto h = readPcdHeader(path);
@@ -159,6 +168,11 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       const char* enc[] = {"ascii", "binary", "binary_compressed"};
       f.detail = std::string(enc[int(h->encoding)]) +
                  (h->organized() ? ", organized " + std::to_string(h->width) + "x" + std::to_string(h->height) : ", unorganized");
+      if (h->organized()) {
+        // An organized cloud is a camera's image: y points down the image.
+        f.up = -Eigen::Vector3d::UnitY();
+        f.upIsConvention = f.upFromCamera = true;
+      }
       set.files_.push_back(f);
     } else if (ext == ".drc") {
       // libdraco decodes the whole file even to count: record what it delivers and replay that.
@@ -179,6 +193,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       f.detail = info.triangles ? "mesh, " + std::to_string(info.triangles) + " triangles" : "point cloud";
       if (info.shifted) f.detail += ", positions relative to a recorded origin";
       f.recording = std::move(rec);
+      f.up = Eigen::Vector3d::UnitY();
       set.files_.push_back(f);
     } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
       auto layout = readTextLayout(path, textColumns);
@@ -193,6 +208,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
       f.hasConfidence = layout->hasConfidence;
       f.hasClassification = layout->hasClassification;
       f.columns = textColumns;
+      f.up = Eigen::Vector3d::UnitY();
       set.files_.push_back(f);
     } else {
       return Status::badInput(path + ": unsupported input format '" + ext +

@@ -29,6 +29,12 @@ struct InputFile {
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
   int scanIndex = -1;           // index into InputSet::towardScanner, or -1
+  // The up axis the file's format implies (zero: none). A convention (upIsConvention: LAS +z,
+  // Stanford scan sets +y, an organized PCD's camera -y) is relied on; otherwise it is the
+  // format's usual default (PLY, OBJ, OFF, Draco, text +y; STL +z), used when the data says
+  // nothing. upFromCamera: the convention is a camera's, only roughly up.
+  Eigen::Vector3d up = Eigen::Vector3d::Zero();
+  bool upIsConvention = false, upFromCamera = false;
   // Draco and OBJ/OFF/STL: what the (whole-file) decode in open() delivered, replayed by stream().
   std::shared_ptr<const StreamRecording> recording;
 };

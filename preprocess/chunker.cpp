@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <algorithm>
 #include <map>
 
 #include <Eigen/Geometry>
@@ -30,6 +31,11 @@ class BoundsSink : public BatchSink {
         continue;
       }
       Eigen::Vector3d p(b.x[i], b.y[i], b.z[i]);
+      if (b.hasColors() && !out_.colorVaries) {
+        const uint8_t c[3] = {b.r[i], b.g[i], b.b[i]};
+        if (!haveColor_) std::copy(c, c + 3, first_), haveColor_ = true;
+        out_.colorVaries = !std::equal(c, c + 3, first_);
+      }
       out_.min = out_.min.cwiseMin(p);
       out_.max = out_.max.cwiseMax(p);
       sum_ += p - (out_.count == 0 ? (ref_ = p) : ref_);  // shifted sum: no cancellation
@@ -48,6 +54,8 @@ class BoundsSink : public BatchSink {
   const InputSet& in_;
   bool strict_;
   Eigen::Vector3d sum_ = Eigen::Vector3d::Zero(), ref_ = Eigen::Vector3d::Zero();
+  bool haveColor_ = false;
+  uint8_t first_[3] = {0, 0, 0};
 };
 
 // Buffers records per chunk node and appends them to the node's file when full.
@@ -119,7 +127,7 @@ class DistributeSink : public BatchSink {
       for (int a = 0; a < 3; ++a) p.q[a] = qz_.encode(rel[a], a);
       if (b.hasNormals()) {
         p.n[0] = b.nx[i]; p.n[1] = b.ny[i]; p.n[2] = b.nz[i];
-        p.flags |= 1;
+        p.flags |= kChunkHasNormal;
       }
       if (b.hasColors()) { p.rgb[0] = b.r[i]; p.rgb[1] = b.g[i]; p.rgb[2] = b.b[i]; }
       p.scan = b.scan.empty() ? 0 : b.scan[i];
@@ -153,6 +161,8 @@ class DistributeSink : public BatchSink {
       for (uint32_t v : {a, b, c})
         for (int k = 0; k < 3; ++k) out_.vertexNormal[3 * size_t(v) + k] += float(nn[k]);
     }
+    SA_RETURN_IF_ERROR(sampleLargeTriangles(idx, n));
+    triBase_ += n;
     return Status::ok();
   }
 
@@ -162,9 +172,65 @@ class DistributeSink : public BatchSink {
   ChunkFiles& files_;
   int level_;
   DistributeResult& out_;
+  // The octree is built from points, so a triangle much larger than its neighbours (the flat
+  // base of a scanned bust) would have no cell where none of its vertices lies: such triangles
+  // get points sampled over them, about one median edge length apart (the median over the
+  // edges seen so far, at least one batch of triangles).
+  Status sampleLargeTriangles(const uint32_t* idx, size_t n) {
+    const auto& P = out_.vertexPos;
+    auto edge = [&](uint32_t u, uint32_t v) { return (Eigen::Vector3d(&P[3 * size_t(u)]) - Eigen::Vector3d(&P[3 * size_t(v)])).norm(); };
+    for (size_t t = 0; t < n && edges_.size() < kEdgeSample; ++t) {
+      const uint32_t a = idx[3 * t], b = idx[3 * t + 1];
+      if (3 * size_t(std::max(a, b)) + 2 < P.size()) edges_.push_back(edge(a, b));
+    }
+    if (edges_.empty()) return Status::ok();
+    std::vector<double> tmp(edges_);
+    std::nth_element(tmp.begin(), tmp.begin() + long(tmp.size() / 2), tmp.end());
+    const double median = tmp[tmp.size() / 2];
+    if (!(median > 0)) return Status::ok();
+    const int shift = 32 - level_;
+    for (size_t t = 0; t < n; ++t) {
+      const uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+      if (3 * size_t(std::max({a, b, c})) + 2 >= P.size()) continue;
+      const double longest = std::max({edge(a, b), edge(b, c), edge(c, a)});
+      if (!(longest > kLargeEdges * median)) continue;
+      const Eigen::Vector3d pa(&P[3 * a]), pb(&P[3 * b]), pc(&P[3 * c]);
+      Eigen::Vector3d nn = (pb - pa).cross(pc - pa);
+      if (!(nn.norm() > 0)) continue;
+      nn.normalize();
+      out_.surfaceSampleStep = std::max(out_.surfaceSampleStep, median);
+      // A lattice about one median edge apart along AB and AC (area-proportional: a long thin
+      // triangle gets few points), the corners left out (they are vertices).
+      const int mb = static_cast<int>(std::min(std::ceil((pb - pa).norm() / median), 4096.0));
+      const int mc = static_cast<int>(std::min(std::ceil((pc - pa).norm() / median), 4096.0));
+      for (int i = 0; i <= mb; ++i)
+        for (int j = 0; j <= mc; ++j) {
+          const double fb = double(i) / mb, fc = double(j) / mc;
+          if (fb + fc > 1 + 1e-9 || (i == 0 && j == 0) || (i == mb && j == 0) || (i == 0 && j == mc)) continue;
+          const Eigen::Vector3d q = pa + (pb - pa) * fb + (pc - pa) * fc;
+          ChunkPoint p{};
+          for (int k = 0; k < 3; ++k) {
+            p.q[k] = qz_.encode(q[k], k);
+            p.n[k] = float(nn[k]);
+          }
+          p.flags = kChunkHasNormal | kChunkSurfaceSample;
+          p.vid = static_cast<uint32_t>(triBase_ + t);
+          const uint32_t ix = level_ ? p.q[0] >> shift : 0, iy = level_ ? p.q[1] >> shift : 0,
+                         iz = level_ ? p.q[2] >> shift : 0;
+          SA_RETURN_IF_ERROR(files_.add(keyOf(ix, iy, iz, level_), p));
+          ++out_.surfaceSamples;
+        }
+    }
+    return Status::ok();
+  }
+
+  static constexpr size_t kEdgeSample = 1 << 16;
+  static constexpr double kLargeEdges = 4;  // a triangle is large beyond this many median edges
   const ProgressFn& progress_;
   uint64_t total_, seen_ = 0;
   std::FILE* tri_ = nullptr;
+  std::vector<double> edges_;
+  uint64_t triBase_ = 0;
 };
 
 // Streams an over-full chunk file into its eight children.

@@ -27,6 +27,14 @@ struct ChunkPoint {
 };
 static_assert(sizeof(ChunkPoint) == 36);
 
+// ChunkPoint::flags bits.
+enum ChunkFlags : uint8_t {
+  kChunkHasNormal = 1,
+  // A point sampled on a large triangle (triangle path), not an input vertex: vid is the
+  // triangle's index. Large triangles get cells where none of their vertices lies.
+  kChunkSurfaceSample = 2,
+};
+
 // Maps positions relative to the pack origin to 32-bit integers over the root cube.
 struct Quantizer {
   Eigen::Vector3d cubeMin = Eigen::Vector3d::Zero();  // relative to the pack origin
@@ -45,6 +53,7 @@ struct BoundsInfo {
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  // absolute
   uint64_t count = 0;    // finite points
   uint64_t skipped = 0;  // NaN / Inf coordinates
+  bool colorVaries = false;  // some two points differ in colour (constant colour is no colour)
 };
 
 struct ChunkInfo {
@@ -78,6 +87,8 @@ struct DistributeOptions {
 struct DistributeResult {
   std::vector<ChunkInfo> chunks;
   uint64_t triangles = 0;
+  uint64_t surfaceSamples = 0;  // points sampled on large triangles (kChunkSurfaceSample)
+  double surfaceSampleStep = 0;  // their lattice step (0: none)
   std::string trianglePath;  // u32 triples, when keepTriangles
   // Mesh vertices (triangle path only): positions relative to the pack origin and
   // area-weighted normals, indexed by vertex id.

@@ -4,8 +4,10 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace sa {
@@ -13,60 +15,199 @@ namespace {
 
 using KdTree = flann::Index<flann::L2_Simple<double>>;
 
-}  // namespace
+// k nearest neighbours (the point itself included) of points [begin, end), row per point.
+void knn(KdTree& tree, const double* pos, size_t begin, size_t end, int k, std::vector<int>& ind,
+         std::vector<double>& dist) {
+  const size_t m = end - begin;
+  ind.resize(m * size_t(k));
+  dist.resize(m * size_t(k));
+  flann::Matrix<int> mi(ind.data(), m, size_t(k));
+  flann::Matrix<double> md(dist.data(), m, size_t(k));
+  flann::Matrix<double> q(const_cast<double*>(pos + 3 * begin), m, 3);
+  tree.knnSearch(q, mi, md, k, flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
+}
 
-void estimateNormals(const double* pos, size_t n, int k, const NormalOrientation& orient, float* nrm) {
-  if (n == 0) return;
-  k = static_cast<int>(std::min<size_t>(k, n));
-  flann::Matrix<double> data(const_cast<double*>(pos), n, 3);
-  KdTree tree(data, flann::KDTreeSingleIndexParams(15));
-  tree.buildIndex();
+Eigen::Vector3d towardOf(const NormalOrientation& orient, size_t i, const Eigen::Vector3d& p) {
+  if (!orient.towardScanner.empty() && orient.scan) {
+    const uint16_t s = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + i * orient.scanStride);
+    return s < orient.towardScanner.size() ? orient.towardScanner[s] : Eigen::Vector3d::UnitZ();
+  }
+  return p - orient.center;
+}
+
+constexpr int kDensityNeighbours = 8;
+
+// Per point: the mean distance to its kDensityNeighbours nearest neighbours (local density).
+std::vector<float> meanNeighbourDistance(KdTree& tree, const double* pos, size_t n) {
+  std::vector<float> out(n, 0.f);
+  const int k = static_cast<int>(std::min<size_t>(kDensityNeighbours + 1, n));
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    const size_t m = r.size();
-    std::vector<int> ind(m * k);
-    std::vector<double> dist(m * k);
-    flann::Matrix<int> mi(ind.data(), m, k);
-    flann::Matrix<double> md(dist.data(), m, k);
-    flann::Matrix<double> q(const_cast<double*>(pos + 3 * r.begin()), m, 3);
-    flann::SearchParams sp(flann::FLANN_CHECKS_UNLIMITED);
-    tree.knnSearch(q, mi, md, k, sp);
-    for (size_t a = 0; a < m; ++a) {
-      const size_t i = r.begin() + a;
-      const Eigen::Vector3d p(&pos[3 * i]);
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    std::vector<int> ind;
+    std::vector<double> dist;
+    knn(tree, pos, r.begin(), r.end(), k, ind, dist);
+    for (size_t a = 0; a < r.size(); ++a) {
+      double sum = 0;
       int cnt = 0;
-      for (int j = 0; j < k; ++j) {
-        const int id = ind[a * k + j];
-        if (id < 0) continue;
-        mean += Eigen::Vector3d(&pos[3 * size_t(id)]) - p;
-        ++cnt;
-      }
-      float* out = &nrm[3 * i];
-      out[0] = out[1] = out[2] = 0.f;
-      if (cnt < 3) continue;
-      mean /= cnt;
-      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-      for (int j = 0; j < k; ++j) {
-        const int id = ind[a * k + j];
-        if (id < 0) continue;
-        Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(id)]) - p - mean;
-        cov += d * d.transpose();
-      }
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-      const Eigen::Vector3d l = es.eigenvalues();
-      if (es.info() != Eigen::Success || !(l[1] > 1e-12 * l[2]) || !(l[2] > 0)) continue;  // collinear / duplicates
-      Eigen::Vector3d nn = es.eigenvectors().col(0).normalized();
-      Eigen::Vector3d toward;
-      if (!orient.towardScanner.empty() && orient.scan) {
-        const uint16_t s = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + i * orient.scanStride);
-        toward = s < orient.towardScanner.size() ? orient.towardScanner[s] : Eigen::Vector3d::UnitZ();
-      } else {
-        toward = p - orient.center;
-      }
-      if (nn.dot(toward) < 0) nn = -nn;
-      out[0] = float(nn.x()); out[1] = float(nn.y()); out[2] = float(nn.z());
+      for (int j = 1; j < k; ++j)  // [0] is the point itself
+        if (ind[a * k + j] >= 0) sum += std::sqrt(dist[a * k + j]), ++cnt;
+      out[r.begin() + a] = cnt ? float(sum / cnt) : 0.f;
     }
   });
+  return out;
+}
+
+// One point's neighbourhood: the moving-least-squares surface (Alexa et al. 2003; PCL's MLS
+// with its "simple" projection): a Gaussian-weighted plane, then a weighted quadric height
+// function over it; the point is projected onto the quadric along the plane normal.
+struct LocalSurface {
+  bool ok = false;
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // unoriented
+  Eigen::Vector3d projected = Eigen::Vector3d::Zero();
+  double residual = 0;  // weighted RMS distance of the neighbours to the quadric
+  double radius = 0;    // distance to the farthest neighbour
+};
+
+LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* ind, const double* dist2, int k) {
+  LocalSurface ls;
+  double h2 = 0;
+  for (int j = 0; j < k; ++j)
+    if (ind[j] >= 0) h2 = std::max(h2, dist2[j]);
+  if (!(h2 > 0)) return ls;
+  ls.radius = std::sqrt(h2);
+  // Weights exp(-d^2 / h^2) with h the neighbourhood radius (PCL's default Gaussian).
+  double wsum = 0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  std::array<double, 64> wt{};
+  const int kk = std::min(k, 64);
+  int cnt = 0;
+  for (int j = 0; j < kk; ++j) {
+    if (ind[j] < 0) continue;
+    wt[size_t(j)] = std::exp(-dist2[j] / h2);
+    wsum += wt[size_t(j)];
+    mean += wt[size_t(j)] * (Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p);
+    ++cnt;
+  }
+  if (cnt < 3) return ls;
+  mean /= wsum;
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (int j = 0; j < kk; ++j) {
+    if (ind[j] < 0) continue;
+    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p - mean;
+    cov += wt[size_t(j)] * d * d.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  const Eigen::Vector3d l = es.eigenvalues();
+  if (es.info() != Eigen::Success || !(l[1] > 1e-12 * l[2]) || !(l[2] > 0)) return ls;  // collinear / duplicates
+  const Eigen::Vector3d n = es.eigenvectors().col(0).normalized();
+  const Eigen::Vector3d u = es.eigenvectors().col(2).normalized(), v = n.cross(u);
+  ls.ok = true;
+  ls.normal = n;
+  ls.projected = p;
+  if (cnt < 6) return ls;
+  // Quadric z = c0 + c1 x + c2 y + c3 x^2 + c4 xy + c5 y^2 in (u, v, n) about the weighted
+  // centroid, coordinates scaled by h (conditioning).
+  const double h = ls.radius;
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+  for (int j = 0; j < kk; ++j) {
+    if (ind[j] < 0) continue;
+    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p - mean;
+    const double x = d.dot(u) / h, y = d.dot(v) / h, z = d.dot(n) / h;
+    Eigen::Matrix<double, 6, 1> f;
+    f << 1, x, y, x * x, x * y, y * y;
+    A.selfadjointView<Eigen::Lower>().rankUpdate(f, wt[size_t(j)]);
+    b += wt[size_t(j)] * z * f;
+  }
+  A = A.selfadjointView<Eigen::Lower>();
+  A.diagonal().array() += 1e-9 * A.trace();
+  Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(A);
+  const Eigen::Matrix<double, 6, 1> c = ldlt.solve(b);
+  if (ldlt.info() != Eigen::Success || !c.allFinite()) return ls;
+  double se = 0;
+  for (int j = 0; j < kk; ++j) {
+    if (ind[j] < 0) continue;
+    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p - mean;
+    const double x = d.dot(u) / h, y = d.dot(v) / h, z = d.dot(n) / h;
+    const double r = z - (c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y);
+    se += wt[size_t(j)] * r * r;
+  }
+  ls.residual = std::sqrt(se / wsum) * h;
+  const Eigen::Vector3d d = -mean;  // the point itself relative to the centroid
+  const double x = d.dot(u) / h, y = d.dot(v) / h;
+  const double z = c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y;
+  ls.projected = p + mean + (x * u + y * v + z * n) * h;
+  const double fx = c[1] + 2 * c[3] * x + c[4] * y, fy = c[2] + c[4] * x + 2 * c[5] * y;
+  ls.normal = (n - fx * u - fy * v).normalized();
+  return ls;
+}
+
+}  // namespace
+
+size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
+                  std::vector<uint8_t>& keep) {
+  keep.assign(n, 1);
+  if (n == 0) return 0;
+  const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
+  // The kd-tree indexes a copy: smoothed positions are written back only when every point is done.
+  std::vector<double> src(pos, pos + 3 * n);
+  flann::Matrix<double> data(src.data(), n, 3);
+  KdTree tree(data, flann::KDTreeSingleIndexParams(15));
+  tree.buildIndex();
+  const std::vector<float> density = opt.outlierRatio > 0 ? meanNeighbourDistance(tree, src.data(), n) : std::vector<float>();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    std::vector<int> ind;
+    std::vector<double> dist;
+    knn(tree, src.data(), r.begin(), r.end(), k, ind, dist);
+    std::vector<float> around(static_cast<size_t>(k));
+    for (size_t a = 0; a < r.size(); ++a) {
+      const size_t i = r.begin() + a;
+      const int* in = &ind[a * size_t(k)];
+      const Eigen::Vector3d p(&src[3 * i]);
+      if (!density.empty()) {
+        // Outlier: much farther from its neighbours than they are from theirs (a local test,
+        // so sparse but real regions - water returns, a scan's fringe - stay).
+        size_t m = 0;
+        for (int j = 1; j < k; ++j)
+          if (in[j] >= 0) around[m++] = density[size_t(in[j])];
+        if (m > 0) {
+          std::nth_element(around.begin(), around.begin() + long(m / 2), around.begin() + long(m));
+          if (density[i] > opt.outlierRatio * around[m / 2]) {
+            keep[i] = 0;
+            continue;
+          }
+        }
+      }
+      const LocalSurface ls = fitLocal(src.data(), p, in, &dist[a * size_t(k)], k);
+      float* out = &nrm[3 * i];
+      const Eigen::Vector3d given(out[0], out[1], out[2]);
+      if (!ls.ok) {
+        if (opt.estimateNormals) out[0] = out[1] = out[2] = 0.f;  // unknown
+        continue;
+      }
+      // Smooth only where the neighbourhood is a surface and the move is small against it
+      // (layers, vegetation and sharp features keep their points where they are).
+      const double move = (ls.projected - p).norm();
+      if (opt.smooth && ls.residual < 0.25 * ls.radius && move < 0.5 * ls.radius)
+        for (int c = 0; c < 3; ++c) pos[3 * i + c] = ls.projected[c];
+      Eigen::Vector3d nn = ls.normal;
+      const Eigen::Vector3d toward = given.squaredNorm() > 0.25 && !opt.estimateNormals ? given : towardOf(orient, i, p);
+      if (nn.dot(toward) < 0) nn = -nn;
+      if (opt.estimateNormals || opt.smooth)
+        for (int c = 0; c < 3; ++c) out[c] = float(nn[c]);
+    }
+  });
+  return size_t(std::count(keep.begin(), keep.end(), 0));
+}
+
+void estimateNormals(const double* pos, size_t n, int k, const NormalOrientation& orient, float* nrm) {
+  SurfaceOptions opt;
+  opt.neighbours = k;
+  opt.estimateNormals = true;
+  opt.smooth = false;
+  opt.outlierRatio = 0;
+  std::vector<double> copy(pos, pos + 3 * n);
+  std::vector<uint8_t> keep;
+  fitSurface(copy.data(), n, orient, opt, nrm, keep);
 }
 
 namespace {

@@ -1,5 +1,6 @@
-// Neighbour queries with FLANN (kd-tree): normal estimation by PCA over the k nearest
-// neighbours, and the sample-spacing estimate that sets texel sizes and coverage radii.
+// Neighbour queries with FLANN (kd-tree): outlier removal, normal estimation and moving-least-
+// squares smoothing over the k nearest neighbours, and the sample-spacing estimate that sets
+// texel sizes and coverage radii.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -18,6 +19,25 @@ struct NormalOrientation {
   size_t scanStride = 0;
   Eigen::Vector3d center = Eigen::Vector3d::Zero();  // relative to the same origin as pos
 };
+
+struct SurfaceOptions {
+  int neighbours = 24;        // k nearest neighbours per point
+  bool estimateNormals = true;  // false: nrm holds the file's normals (their sign orients the fit)
+  bool smooth = true;           // move points onto their moving-least-squares surface
+  // A point whose mean distance to its 8 nearest neighbours exceeds this many times the
+  // median of its neighbours' is an outlier (0: keep all).
+  double outlierRatio = 3;
+};
+
+// The surface through a chunk's points, from one k-nearest-neighbour query per point (FLANN):
+// outliers (flagged 0 in keep), unit normals (PCA of the neighbourhood refined by the MLS
+// quadric, oriented toward the scanner, the file's normal or away from the centre) and, with
+// opt.smooth, positions moved onto the MLS surface where it is one (noise of merged scans
+// averaged out). pos: n xyz-interleaved positions (updated); nrm: n normals (in/out). Points
+// whose neighbourhood is degenerate keep their position and get a zero normal when estimated.
+// Returns the number of outliers.
+size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
+                  std::vector<uint8_t>& keep);
 
 // pos: n xyz-interleaved positions. Writes n unit normals (xyz-interleaved) into nrm.
 // Points with fewer than 3 distinct neighbours get a zero normal (unknown).

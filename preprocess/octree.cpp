@@ -74,6 +74,30 @@ PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size
   return f;
 }
 
+uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, const PlaneFit& f, double bin,
+                          double gap, uint32_t enough) {
+  if (!(bin > 0) || !(gap > 0) || n < 2) return 0;
+  // (bin key, height) for every point, grouped by key; keys from bin coordinates relative to
+  // the centroid (a cell spans at most a few million bins per side).
+  std::vector<std::pair<uint64_t, double>> e(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - f.centroid;
+    const int64_t bu = static_cast<int64_t>(std::floor(d.dot(f.u) / bin)) + (int64_t(1) << 31);
+    const int64_t bv = static_cast<int64_t>(std::floor(d.dot(f.v) / bin)) + (int64_t(1) << 31);
+    e[i] = {(uint64_t(bu) << 32) ^ uint64_t(bv & 0xffffffff), d.dot(f.w)};
+  }
+  std::sort(e.begin(), e.end());
+  uint32_t layered = 0;
+  for (size_t a = 0; a < n && layered < enough;) {
+    size_t b = a + 1;
+    bool split = false;
+    for (; b < n && e[b].first == e[a].first; ++b) split |= e[b].second - e[b - 1].second > gap;
+    layered += split;
+    a = b;
+  }
+  return layered;
+}
+
 void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
                  const Eigen::Vector3d& rootMin, double rootSize, int rootLevel, const OctreeParams& params,
                  std::vector<OctreeCell>& out) {
@@ -86,6 +110,12 @@ void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx
     if (it.count == 0) continue;
     PlaneFit fit = fitPlane(pos, nrm, idx.data() + it.first, it.count, cosMax, params.outlierFraction);
     const bool canSplit = it.level < params.maxDepth && it.count >= params.minSplitPoints;
+    if (fit.heightField &&
+        countLayeredBins(pos, idx.data() + it.first, it.count, fit, params.layerBin, params.layerGap,
+                         params.layeredBins) >= params.layeredBins) {
+      fit.heightField = false;
+      fit.layered = true;
+    }
     if (fit.heightField || !canSplit) {
       OctreeCell c;
       c.fit = fit;

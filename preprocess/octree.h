@@ -16,6 +16,12 @@ struct OctreeParams {
   // Fraction of a cell's points whose normal may fail the test (estimated normals of merged,
   // slightly misaligned scans are noisy; a strict test then splits flat regions for nothing).
   double outlierFraction = 0.01;
+  // The layer test (0 = off): over the best-fit plane, in square bins of side layerBin, a bin
+  // whose points' heights leave a gap wider than layerGap is layered (canopy over ground, a
+  // deck over water); a cell with layeredBins or more such bins is not a height field,
+  // whatever its normals say. Both in world units, set from the sample spacing.
+  double layerBin = 0, layerGap = 0;
+  uint32_t layeredBins = 3;
 };
 
 struct PlaneFit {
@@ -25,6 +31,7 @@ struct PlaneFit {
   bool heightField = false;  // passed the normal test
   double minCos = 1;         // smallest n·W over the cell's points with a valid normal
   uint32_t violations = 0;   // points whose normal fails the test
+  bool layered = false;      // failed the layer test (normals passed)
 };
 
 // PCA plane of the points idx[0..n) (positions xyz-interleaved, normals likewise; a normal
@@ -32,6 +39,10 @@ struct PlaneFit {
 // points, duplicates and collinear sets fall back to a frame built from the mean normal.
 PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size_t n, double cosMax,
                   double outlierFraction = 0);
+
+// Number of layered bins (see OctreeParams::layerBin), counting up to `enough`.
+uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, const PlaneFit& fit, double bin,
+                          double gap, uint32_t enough);
 
 struct OctreeCell {
   PlaneFit fit;

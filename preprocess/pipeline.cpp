@@ -16,17 +16,49 @@
 #include "common/fileio.h"
 #include "preprocess/normals.h"
 #include "preprocess/pullpush.h"
+#include "preprocess/triangle_cells.h"
+#include "preprocess/up_axis.h"
 
 namespace sa {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+
 double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+Eigen::Vector3d vec(const double* d) { return Eigen::Vector3d(d[0], d[1], d[2]); }
 
 struct WorkCell {
   CellRecord rec{};
-  uint32_t chunk = 0, first = 0, count = 0;
-  double ext[6] = {0, 0, 0, 0, 0, 0};  // raw point extents in the frame: uMin uMax vMin vMax wMin wMax
+  uint32_t chunk = 0, first = 0, count = 0;  // range of the chunk's points (cell order), surface samples included
+  double ext[6] = {0, 0, 0, 0, 0, 0};        // point extents in the frame: uMin uMax vMin vMax wMin wMax
+  bool sampled = false;                      // holds points sampled on large triangles
+};
+
+// What the phases of one pack share.
+struct PackJob {
+  PackJob(const InputSet& in, const PackOptions& o, const ProgressFn& p, PackSummary& s)
+      : input(in), opt(o), progress(p), sum(s) {}
+  const InputSet& input;
+  const PackOptions& opt;
+  const ProgressFn& progress;
+  PackSummary& sum;
+  bool triangles = false, fileNormals = false, color = false;
+  BoundsInfo bounds;
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  Quantizer qz;
+  ScratchDir scratch;
+  DistributeResult dist;
+  std::vector<WorkCell> cells;
+  std::vector<uint32_t> vertexCell;                         // triangle path: the cell of each vertex
+  std::vector<std::pair<uint32_t, uint32_t>> sampleCells;   // triangle path: (triangle, cell) of its surface samples
+  std::vector<std::pair<uint32_t, uint32_t>> triCells;      // triangle path: (triangle, cell) to rasterize, sorted
+  double spacingSum = 0;
+  uint64_t spacingWeight = 0;
+  double texel = 0;
+  std::vector<CellRecord> records;
+  PackMeta meta{};
 };
 
 void decodePositions(const std::vector<ChunkPoint>& pts, const Quantizer& qz, std::vector<double>& pos) {
@@ -37,23 +69,25 @@ void decodePositions(const std::vector<ChunkPoint>& pts, const Quantizer& qz, st
   });
 }
 
-Eigen::Vector3d vec(const double* d) { return Eigen::Vector3d(d[0], d[1], d[2]); }
-
 // Fills the summary from an existing pack (the up-to-date case).
 void summarizeExisting(const PackReader& r, PackSummary& sum) {
   const PackMeta& m = r.meta();
   sum.pointsRead = m.sourcePoints;
   sum.pointsSkipped = m.skippedPoints;
+  sum.outliersRemoved = m.outliersRemoved;
   sum.triangles = m.sourceTriangles;
   sum.cells = m.cellCount;
   sum.pages = m.pageCount;
-  sum.pageSize = m.pageSize;
+  sum.pageWidth = m.pageWidth;
+  sum.pageHeight = m.pageHeight;
   sum.chunks = m.chunkCount;
   sum.texels = m.texelsUsed;
   sum.spacing = m.sampleSpacing;
   sum.texelSize = m.texelSize;
   sum.fileBytes = r.fileBytes();
   sum.hasColor = r.hasColor();
+  sum.up = r.up();
+  sum.upSource = m.upSource;
   sum.fromTriangles = (m.flags & kPackFromTriangles) != 0;
   sum.normalsEstimated = (m.flags & kPackNormalsEstimated) != 0;
   for (const CellRecord& c : r.cells()) {
@@ -64,20 +98,498 @@ void summarizeExisting(const PackReader& r, PackSummary& sum) {
   }
 }
 
+// ---- pass 1: bounds ----
+Status boundsPhase(PackJob& job) {
+  const auto t0 = Clock::now();
+  SA_RETURN_IF_ERROR(computeBounds(job.input, job.bounds, job.progress, job.opt.strict));
+  job.sum.pointsRead = job.bounds.count;
+  job.sum.pointsSkipped = job.bounds.skipped;
+  // Colour channels that never vary (a LAS file whose RGB fields are all 0) are no colour.
+  job.color = job.input.anyHasColors() && job.bounds.colorVaries;
+  if (job.input.anyHasColors() && !job.bounds.colorVaries)
+    job.sum.warnings.push_back("every point has the same colour; the pack is shaded without colour");
+  job.origin = (job.bounds.min + job.bounds.max) / 2;
+  const Eigen::Vector3d ext = job.bounds.max - job.bounds.min;
+  job.qz.cubeSize = std::max(ext.maxCoeff() * 1.0001, std::max(1e-12, 1e-12 * job.origin.cwiseAbs().maxCoeff()));
+  job.qz.cubeMin = Eigen::Vector3d::Constant(-job.qz.cubeSize / 2);
+  job.sum.seconds[0] = secondsSince(t0);
+  return Status::ok();
+}
+
+// ---- pass 2: distribute into chunks ----
+Status distributePhase(PackJob& job, const std::string& outPath) {
+  const auto t0 = Clock::now();
+  // Leftovers of a killed pack (chunk directories, a partial output) are removed, not reused.
+  const std::string scratchParent = job.opt.scratchParent.empty() ? directoryOf(outPath) : job.opt.scratchParent;
+  removeStaleTemporaries(scratchParent, ".scanatlas-chunks-");
+  removeStaleTemporaries(directoryOf(outPath), std::filesystem::path(outPath).filename().string() + ".tmp-");
+  SA_RETURN_IF_ERROR(job.scratch.create(scratchParent, ".scanatlas-chunks-"));
+  DistributeOptions dopt;
+  dopt.maxPointsPerChunk = std::max<uint64_t>(1024, job.opt.memBudget / kBytesPerPointInFlight);
+  dopt.scratchDir = job.scratch.path();
+  dopt.origin = job.origin;
+  dopt.keepTriangles = job.triangles;
+  SA_RETURN_IF_ERROR(distributePoints(job.input, job.qz, dopt, job.dist, job.progress));
+  job.sum.triangles = job.dist.triangles;
+  job.sum.surfaceSamples = job.dist.surfaceSamples;
+  job.sum.chunks = static_cast<uint32_t>(job.dist.chunks.size());
+  job.sum.seconds[1] = secondsSince(t0);
+  if (job.triangles && job.dist.triangles == 0)
+    return Status::badInput(job.input.files()[0].path + ": face element holds no triangles; use --as-points");
+  return Status::ok();
+}
+
+// Normals of a chunk's points from the file or the mesh (zero where unknown).
+void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::vector<float>& nrm) {
+  const size_t n = pts.size();
+  nrm.assign(3 * n, 0.f);
+  for (size_t i = 0; i < n; ++i) {
+    if (job.fileNormals || (pts[i].flags & kChunkSurfaceSample)) {
+      std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
+    } else if (job.triangles) {
+      const size_t v = pts[i].vid;
+      if (3 * v + 2 < job.dist.vertexNormal.size()) {
+        Eigen::Vector3f nn(&job.dist.vertexNormal[3 * v]);
+        if (nn.norm() > 0) nn.normalize();
+        std::copy(nn.data(), nn.data() + 3, &nrm[3 * i]);
+      }
+    }
+  }
+}
+
+// Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h).
+// Drops the outliers from pts, pos and nrm.
+void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm) {
+  NormalOrientation orient;
+  orient.towardScanner = job.input.towardScanner();
+  orient.center = job.bounds.centroid - job.origin;
+  orient.scan = pts.empty() ? nullptr : &pts[0].scan;
+  orient.scanStride = sizeof(ChunkPoint);
+  SurfaceOptions so;
+  so.neighbours = job.opt.normalNeighbours;
+  so.estimateNormals = !job.fileNormals;
+  so.smooth = job.opt.smooth;
+  so.outlierRatio = job.opt.outlierRatio;
+  std::vector<uint8_t> keep;
+  const size_t removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep);
+  job.sum.outliersRemoved += removed;
+  if (removed == 0) return;
+  size_t m = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    if (!keep[i]) continue;
+    pts[m] = pts[i];
+    std::copy(&pos[3 * i], &pos[3 * i] + 3, &pos[3 * m]);
+    std::copy(&nrm[3 * i], &nrm[3 * i] + 3, &nrm[3 * m]);
+    ++m;
+  }
+  pts.resize(m);
+  pos.resize(3 * m);
+  nrm.resize(3 * m);
+}
+
+// Sample spacing of a chunk's input points (points sampled on large triangles left out).
+double chunkSpacing(const std::vector<ChunkPoint>& pts, const std::vector<double>& pos) {
+  std::vector<double> real;
+  for (size_t i = 0; i < pts.size(); ++i)
+    if (!(pts[i].flags & kChunkSurfaceSample)) real.insert(real.end(), &pos[3 * i], &pos[3 * i] + 3);
+  return real.size() == pos.size() ? estimateSpacing(pos.data(), pts.size()) : estimateSpacing(real.data(), real.size() / 3);
+}
+
+// Records the octree's cells of chunk ci (frames, extents, which vertices and samples they hold).
+void addCells(PackJob& job, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
+              const std::vector<double>& pos, const std::vector<ChunkPoint>& sorted) {
+  for (const OctreeCell& c : oc) {
+    WorkCell wc;
+    wc.chunk = ci;
+    wc.first = c.first;
+    wc.count = c.count;
+    const PlaneFit& f = c.fit;
+    for (int a = 0; a < 3; ++a) {
+      wc.rec.origin[a] = f.centroid[a];
+      wc.rec.u[a] = f.u[a];
+      wc.rec.v[a] = f.v[a];
+      wc.rec.w[a] = f.w[a];
+    }
+    wc.rec.level = static_cast<uint8_t>(std::min(c.level, 255));
+    wc.rec.flags = (c.forced ? kCellForced : 0) | (f.degenerate ? kCellDegenerate : 0);
+    job.sum.layeredCells += f.layered;
+    double e[6] = {1e300, -1e300, 1e300, -1e300, 1e300, -1e300};
+    uint32_t real = 0;
+    const uint32_t cellId = static_cast<uint32_t>(job.cells.size());
+    for (uint32_t k = c.first; k < c.first + c.count; ++k) {
+      const Eigen::Vector3d d = vec(&pos[3 * size_t(idx[k])]) - f.centroid;
+      const double uvw[3] = {d.dot(f.u), d.dot(f.v), d.dot(f.w)};
+      for (int a = 0; a < 3; ++a) {
+        e[2 * a] = std::min(e[2 * a], uvw[a]);
+        e[2 * a + 1] = std::max(e[2 * a + 1], uvw[a]);
+      }
+      if (sorted[k].flags & kChunkSurfaceSample) {
+        job.sampleCells.emplace_back(sorted[k].vid, cellId);
+        wc.sampled = true;
+      } else {
+        ++real;
+        if (job.triangles) job.vertexCell[sorted[k].vid] = cellId;
+      }
+    }
+    wc.rec.pointCount = real;
+    std::copy(e, e + 6, wc.ext);
+    job.cells.push_back(wc);
+  }
+}
+
+// ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
+Status chunkCells(PackJob& job, uint32_t ci) {
+  const ChunkInfo& ch = job.dist.chunks[ci];
+  std::vector<ChunkPoint> pts;
+  std::vector<double> pos;
+  std::vector<float> nrm;
+  SA_RETURN_IF_ERROR(loadChunk(ch, pts));
+  decodePositions(pts, job.qz, pos);
+  givenNormals(job, pts, nrm);
+  const double sp = chunkSpacing(pts, pos);
+  if (sp > 0) {
+    job.spacingSum += sp * double(pts.size());
+    job.spacingWeight += pts.size();
+  }
+  if (!job.triangles) fitChunkSurface(job, pts, pos, nrm);
+  const size_t n = pts.size();
+  std::vector<uint32_t> idx(n);
+  for (uint32_t i = 0; i < n; ++i) idx[i] = i;
+  Eigen::Vector3d cmin;
+  double csize;
+  nodeCube(job.qz, ch.level, ch.ix, ch.iy, ch.iz, cmin, csize);
+  OctreeParams op = job.opt.octree;
+  op.maxDepth = std::max(op.maxDepth, ch.level);
+  if (sp > 0 && op.layerGap == 0) {
+    // Layers farther apart than twice the coverage radius would leave the surface between
+    // them uncovered: such a cell is not one height field.
+    op.layerBin = 2 * sp;
+    op.layerGap = 2 * job.opt.coverageRadius * sp;
+  }
+  std::vector<OctreeCell> oc;
+  buildOctree(pos.data(), nrm.data(), idx, cmin, csize, ch.level, op, oc);
+  // Rewrite the chunk in cell order with its normals and (smoothed) positions, for pass B.
+  std::vector<ChunkPoint> sorted(n);
+  for (size_t i = 0; i < n; ++i) {
+    const size_t s = idx[i];
+    sorted[i] = pts[s];
+    std::copy(&nrm[3 * s], &nrm[3 * s] + 3, sorted[i].n);
+    for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
+  }
+  SA_RETURN_IF_ERROR(saveChunk(ch.path, sorted));
+  job.dist.chunks[ci].count = n;
+  addCells(job, ci, oc, idx, pos, sorted);
+  return Status::ok();
+}
+
+Status cellsPhase(PackJob& job) {
+  const auto t0 = Clock::now();
+  if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
+  uint64_t processed = 0;
+  for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
+    processed += job.dist.chunks[ci].count;
+    SA_RETURN_IF_ERROR(chunkCells(job, ci));
+    if (job.progress) job.progress("octree", processed, job.bounds.count + job.dist.surfaceSamples);
+  }
+  std::sort(job.sampleCells.begin(), job.sampleCells.end());
+  job.sampleCells.erase(std::unique(job.sampleCells.begin(), job.sampleCells.end()), job.sampleCells.end());
+  job.sum.seconds[2] = secondsSince(t0);
+  job.sum.spacing = job.spacingWeight ? job.spacingSum / double(job.spacingWeight) : job.qz.cubeSize * 1e-3;
+  if (!(job.sum.spacing > 0)) job.sum.spacing = job.qz.cubeSize * 1e-3;
+  if (job.cells.empty()) return Status::badInput(job.input.files()[0].path + ": no cells produced");
+  if (job.cells.size() > 16u << 20) return Status::badInput("more than 16 Mi cells; lower --max-depth");
+  return Status::ok();
+}
+
+// ---- texel size, tiles, atlas layout ----
+void layoutPhase(PackJob& job) {
+  PackSummary& sum = job.sum;
+  const PackOptions& opt = job.opt;
+  double t = opt.texelSize > 0 ? opt.texelSize : sum.spacing * opt.texelPerSpacing;
+  // Point tiles reach the coverage radius past their points. Triangle tiles hold their
+  // triangles whole (assignPhase grew the extents) plus a texel, and reach the lattice step of
+  // the points sampled on large triangles past those points.
+  const double padUV = job.triangles ? 0.0 : opt.coverageRadius * sum.spacing;
+  double area = 0;
+  for (const WorkCell& c : job.cells)
+    area += (c.ext[1] - c.ext[0] + 2 * padUV + t) * (c.ext[3] - c.ext[2] + 2 * padUV + t);
+  if (opt.texelSize <= 0) t = std::max(t, std::sqrt(area / double(opt.texelBudget)));
+  const uint32_t maxTile = opt.maxPageSize - 2;
+  // Triangle tiles: a texel past their (grown) extents; cells holding points sampled on large
+  // triangles reach the lattice step past them.
+  auto padOf = [&](const WorkCell& c) {
+    return job.triangles ? std::max(t, c.sampled ? job.dist.surfaceSampleStep : 0.0) : padUV;
+  };
+  std::vector<TileSize> sizes(job.cells.size());
+  for (int iter = 0; iter < 40; ++iter) {
+    uint64_t texels = 0;
+    for (size_t i = 0; i < job.cells.size(); ++i) {
+      const WorkCell& c = job.cells[i];
+      const double pad = padOf(c);
+      const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
+      sizes[i].w = static_cast<uint32_t>(std::clamp(std::ceil(eu / t), 1.0, double(maxTile)));
+      sizes[i].h = static_cast<uint32_t>(std::clamp(std::ceil(ev / t), 1.0, double(maxTile)));
+      texels += uint64_t(sizes[i].w) * sizes[i].h;
+    }
+    sum.texels = texels;
+    if (texels <= opt.texelBudget || opt.texelSize > 0) break;
+    t *= std::sqrt(double(texels) / double(opt.texelBudget)) * 1.01;
+  }
+  sum.texelSize = job.texel = t;
+  const PackingResult layout = packAtlas(sizes, opt.maxPageSize);
+  job.records.resize(job.cells.size());
+  for (size_t i = 0; i < job.cells.size(); ++i) {
+    WorkCell& c = job.cells[i];
+    CellRecord& r = c.rec;
+    const double eu = c.ext[1] - c.ext[0] + 2 * padOf(c), ev = c.ext[3] - c.ext[2] + 2 * padOf(c);
+    // The tile spans the box exactly: widen the box to whole texels, centred on the points.
+    const double su = std::max(sizes[i].w * t, eu), sv = std::max(sizes[i].h * t, ev);
+    const double cu = (c.ext[0] + c.ext[1]) / 2, cv = (c.ext[2] + c.ext[3]) / 2;
+    const double wpad = std::max(0.5 * t, 1e-9 * job.qz.cubeSize);
+    r.box[0] = cu - su / 2;
+    r.box[1] = cu + su / 2;
+    r.box[2] = cv - sv / 2;
+    r.box[3] = cv + sv / 2;
+    r.box[4] = c.ext[4] - wpad;
+    r.box[5] = c.ext[5] + wpad;
+    r.page = layout.placements[i].page;
+    r.tileX = layout.placements[i].x;
+    r.tileY = layout.placements[i].y;
+    r.tileW = static_cast<uint16_t>(sizes[i].w);
+    r.tileH = static_cast<uint16_t>(sizes[i].h);
+    job.records[i] = r;
+    if (r.level >= sum.cellsPerLevel.size()) sum.cellsPerLevel.resize(r.level + 1, 0);
+    ++sum.cellsPerLevel[r.level];
+    if (r.flags & kCellForced) ++sum.forcedCells;
+    if (r.flags & kCellDegenerate) ++sum.degenerateCells;
+  }
+  sum.cells = static_cast<uint32_t>(job.cells.size());
+  sum.pages = layout.pageCount;
+  sum.pageWidth = layout.pageWidth;
+  sum.pageHeight = layout.pageHeight;
+}
+
+// ---- the up axis: given, the format's convention, or from the data (preprocess/up_axis.h) ----
+void upPhase(PackJob& job) {
+  std::vector<UpCell> cells(job.cells.size());
+  for (size_t i = 0; i < job.cells.size(); ++i) {
+    cells[i].w = vec(job.cells[i].rec.w);
+    const double* e = job.cells[i].ext;
+    cells[i].area = (e[1] - e[0]) * (e[3] - e[2]);
+  }
+  const UpDecision d = decideUp(job.input, job.opt.up, job.bounds.min, job.bounds.max, cells);
+  job.sum.up = d.up;
+  job.sum.upSource = d.source;
+}
+
+PackMeta makeMeta(const PackJob& job) {
+  const PackSummary& sum = job.sum;
+  PackMeta meta{};
+  for (int a = 0; a < 3; ++a) {
+    meta.origin[a] = job.origin[a];
+    meta.boundsMin[a] = job.bounds.min[a] - job.origin[a];
+    meta.boundsMax[a] = job.bounds.max[a] - job.origin[a];
+    meta.up[a] = sum.up[a];
+  }
+  meta.upSource = sum.upSource;
+  meta.texelSize = job.texel;
+  meta.sampleSpacing = sum.spacing;
+  meta.sourcePoints = job.bounds.count;
+  meta.skippedPoints = job.bounds.skipped;
+  meta.outliersRemoved = sum.outliersRemoved;
+  meta.sourceTriangles = job.dist.triangles;
+  meta.pageWidth = sum.pageWidth;
+  meta.pageHeight = sum.pageHeight;
+  meta.pageCount = sum.pages;
+  meta.flags = (job.color && !job.triangles ? uint32_t(kPackHasColor) : 0u) |
+               (job.triangles ? uint32_t(kPackFromTriangles) : 0u) |
+               (sum.normalsEstimated ? uint32_t(kPackNormalsEstimated) : 0u) | uint32_t(kPackHasNormals);
+  meta.maxDepth = static_cast<uint32_t>(job.opt.octree.maxDepth);
+  meta.chunkCount = sum.chunks;
+  meta.texelsUsed = sum.texels;
+  meta.inputHash = sum.inputHash;
+  return meta;
+}
+
+// NOTE (FORMAT.md): one "source: <path>" line per input, then the command line.
+std::string makeNote(const PackJob& job) {
+  std::string note;
+  for (const auto& f : job.input.sourcePaths()) note += "source: " + f + "\n";
+  for (const auto& f : job.input.files())
+    if (!f.columns.empty()) {
+      note += "columns: " + f.columns + "\n";
+      break;
+    }
+  note += "command: " + job.opt.commandLine + "\n";
+  return note;
+}
+
+// Triangle path: which cells rasterize each triangle (preprocess/triangle_cells.h); cells'
+// extents grow to hold their triangles whole.
+Status assignPhase(PackJob& job) {
+  std::vector<CellExtent> ext(job.cells.size());
+  for (size_t i = 0; i < job.cells.size(); ++i) {
+    const CellRecord& r = job.cells[i].rec;
+    ext[i] = {vec(r.origin), vec(r.u), vec(r.v), vec(r.w), {}};
+    std::copy(job.cells[i].ext, job.cells[i].ext + 6, ext[i].ext);
+  }
+  TriangleCellInput in;
+  in.vertexPos = &job.dist.vertexPos;
+  in.vertexCell = &job.vertexCell;
+  in.sampleCells = &job.sampleCells;
+  in.trianglePath = job.dist.trianglePath;
+  in.minCos = std::cos(job.opt.octree.maxAngleDeg * M_PI / 180);
+  SA_RETURN_IF_ERROR(assignTrianglesToCells(in, ext, job.triCells));
+  for (size_t i = 0; i < job.cells.size(); ++i) std::copy(ext[i].ext, ext[i].ext + 6, job.cells[i].ext);
+  return Status::ok();
+}
+
+// Triangle path: the triangles of chunk ci's cells, as vertex-index triples per cell.
+Status chunkTriangles(const PackJob& job, uint32_t ci, std::unordered_map<uint32_t, std::vector<uint32_t>>& cellTris) {
+  std::FILE* f = std::fopen(job.dist.trianglePath.c_str(), "rb");
+  if (!f) return Status::internal(job.dist.trianglePath + ": cannot reopen");
+  std::vector<uint32_t> buf(3 * 65536);
+  size_t got;
+  uint32_t triIndex = 0;
+  auto tc = job.triCells.begin();
+  while ((got = std::fread(buf.data(), 12, buf.size() / 3, f)) > 0) {
+    for (size_t k = 0; k < got; ++k, ++triIndex) {
+      for (; tc != job.triCells.end() && tc->first == triIndex; ++tc) {
+        if (job.cells[tc->second].chunk != ci) continue;
+        auto& list = cellTris[tc->second];
+        list.insert(list.end(), &buf[3 * k], &buf[3 * k] + 3);
+      }
+    }
+  }
+  std::fclose(f);
+  return Status::ok();
+}
+
+// One cell's tile from its triangles: the box's height range grows to hold the whole of every
+// triangle touching the cell (within the padding), so the parts of those triangles outside the
+// cell's own vertices are not cut where the neighbouring box does not reach either.
+void triangleTile(const PackJob& job, const std::vector<uint32_t>* tris, CellRecord& r, PackWriter& writer,
+                  uint32_t id, TileGrid& g, TileOutput& tile) {
+  const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
+  std::vector<double> tri;
+  if (tris)
+    for (uint32_t vi : *tris) {
+      const Eigen::Vector3d d = vec(&job.dist.vertexPos[3 * size_t(vi)]) - O;
+      tri.insert(tri.end(), {d.dot(U), d.dot(V), d.dot(Wn)});
+    }
+  double wLo = r.box[4], wHi = r.box[5];
+  const double reach = std::max(r.box[1] - r.box[0], r.box[3] - r.box[2]);
+  for (size_t k = 2; k < tri.size(); k += 3) {
+    wLo = std::min(wLo, std::max(tri[k], r.box[4] - reach));
+    wHi = std::max(wHi, std::min(tri[k], r.box[5] + reach));
+  }
+  r.box[4] = g.wMin = wLo;
+  r.box[5] = g.wMax = wHi;
+  writer.setCellHeights(id, wLo, wHi);
+  rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * job.texel, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), true, tile);
+}
+
+// One cell's tile from its points (in the rewritten chunk: smoothed, with normals).
+void pointTile(const PackJob& job, const WorkCell& c, const CellRecord& r, const std::vector<ChunkPoint>& pts,
+               const std::vector<double>& pos, bool withColor, const TileGrid& g, TileOutput& tile) {
+  const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
+  std::vector<double> u(c.count), v(c.count), w(c.count);
+  std::vector<float> nf(3 * size_t(c.count));
+  std::vector<uint8_t> rgb(withColor ? 3 * size_t(c.count) : 0);
+  for (uint32_t k = 0; k < c.count; ++k) {
+    const size_t pi = size_t(c.first) + k;
+    const Eigen::Vector3d d = vec(&pos[3 * pi]) - O;
+    u[k] = d.dot(U);
+    v[k] = d.dot(V);
+    w[k] = d.dot(Wn);
+    const Eigen::Vector3d n(pts[pi].n[0], pts[pi].n[1], pts[pi].n[2]);
+    nf[3 * k] = float(n.dot(U));
+    nf[3 * k + 1] = float(n.dot(V));
+    nf[3 * k + 2] = float(n.dot(Wn));
+    if (withColor) std::copy(pts[pi].rgb, pts[pi].rgb + 3, &rgb[3 * size_t(k)]);
+  }
+  TileSamples s;
+  s.u = u.data();
+  s.v = v.data();
+  s.w = w.data();
+  s.normal = nf.data();
+  s.rgb = withColor ? rgb.data() : nullptr;
+  s.n = c.count;
+  SplatOptions so;
+  so.splatRadius = job.opt.splatRadius * job.sum.spacing;
+  so.coverageRadius = job.opt.coverageRadius * job.sum.spacing;
+  pullPushTile(g, s, so, tile);
+}
+
+// ---- pass B, one chunk: every cell's tile ----
+Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer) {
+  std::vector<ChunkPoint> pts;
+  std::vector<double> pos;
+  SA_RETURN_IF_ERROR(loadChunk(job.dist.chunks[ci], pts));
+  decodePositions(pts, job.qz, pos);
+  std::unordered_map<uint32_t, std::vector<uint32_t>> cellTris;
+  if (job.triangles) SA_RETURN_IF_ERROR(chunkTriangles(job, ci, cellTris));
+  const bool withColor = (job.meta.flags & kPackHasColor) != 0;
+  Status failed;
+  std::mutex failMu;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
+    TileOutput tile;
+    for (size_t m = rr.begin(); m < rr.end(); ++m) {
+      const uint32_t id = mine[m];
+      CellRecord& r = job.records[id];
+      TileGrid g;
+      g.width = r.tileW;
+      g.height = r.tileH;
+      g.u0 = r.box[0];
+      g.v0 = r.box[2];
+      g.du = (r.box[1] - r.box[0]) / r.tileW;
+      g.dv = (r.box[3] - r.box[2]) / r.tileH;
+      g.wMin = r.box[4];
+      g.wMax = r.box[5];
+      if (job.triangles) {
+        auto it = cellTris.find(id);
+        triangleTile(job, it == cellTris.end() ? nullptr : &it->second, r, writer, id, g, tile);
+      } else {
+        pointTile(job, job.cells[id], r, pts, pos, withColor, g, tile);
+      }
+      Status s = writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
+                                  withColor ? tile.rgba.data() : nullptr);
+      if (!s) {
+        std::lock_guard<std::mutex> lock(failMu);
+        failed = s;
+      }
+    }
+  });
+  return failed;
+}
+
+Status tilesPhase(PackJob& job, PackWriter& writer) {
+  std::vector<std::vector<uint32_t>> chunkCellIds(job.dist.chunks.size());
+  for (uint32_t i = 0; i < job.cells.size(); ++i) chunkCellIds[job.cells[i].chunk].push_back(i);
+  uint64_t processed = 0;
+  for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
+    SA_RETURN_IF_ERROR(chunkTiles(job, ci, chunkCellIds[ci], writer));
+    processed += job.dist.chunks[ci].count;
+    if (job.progress) job.progress("heightmaps", processed, job.bounds.count + job.dist.surfaceSamples);
+  }
+  return Status::ok();
+}
+
 }  // namespace
 
 Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
   XXH3_state_t* st = XXH3_createState();
   XXH3_64bits_reset(st);
-  char opts[512];
+  char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 2;
-  const int n = std::snprintf(opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %d %d %.17g %u %.17g %d %u",
-                              kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
-                              o.texelPerSpacing, o.coverageRadius, int(o.asPoints), o.octree.maxDepth,
-                              o.octree.maxAngleDeg, o.octree.minSplitPoints, o.octree.outlierFraction,
-                              o.normalNeighbours, o.maxPageSize);
+  constexpr int kPipelineRevision = 3;
+  const int n = std::snprintf(
+      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u",
+      kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
+      o.texelPerSpacing, o.coverageRadius, o.splatRadius, o.outlierRatio, int(o.smooth), int(o.asPoints), o.up.x(),
+      o.up.y(), o.up.z(), o.octree.maxDepth, o.octree.minSplitPoints, o.octree.maxAngleDeg, o.octree.outlierFraction,
+      o.normalNeighbours, o.maxPageSize);
   XXH3_64bits_update(st, opts, size_t(n));
   for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);
@@ -125,358 +637,31 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
       return Status::ok();
     }
   }
-  const bool triangles = input.hasTriangles() && !opt.asPoints;
-  const bool fileNormals = input.allHaveNormals();
-  const bool color = input.anyHasColors();
-  sum.fromTriangles = triangles;
-  sum.hasColor = color;
-  sum.normalsEstimated = !fileNormals && !triangles;
-
-  // ---- pass 1: bounds ----
-  auto t0 = Clock::now();
-  BoundsInfo bounds;
-  SA_RETURN_IF_ERROR(computeBounds(input, bounds, progress, opt.strict));
-  sum.pointsRead = bounds.count;
-  sum.pointsSkipped = bounds.skipped;
-  sum.seconds[0] = secondsSince(t0);
-  const Eigen::Vector3d origin = (bounds.min + bounds.max) / 2;
-  const Eigen::Vector3d ext = bounds.max - bounds.min;
-  Quantizer qz;
-  qz.cubeSize = std::max(ext.maxCoeff() * 1.0001, std::max(1e-12, 1e-12 * origin.cwiseAbs().maxCoeff()));
-  qz.cubeMin = Eigen::Vector3d::Constant(-qz.cubeSize / 2);
-
-  // ---- pass 2: distribute into chunks ----
-  t0 = Clock::now();
-  // Leftovers of a killed pack (chunk directories, a partial output) are removed, not reused.
-  const std::string scratchParent = opt.scratchParent.empty() ? directoryOf(outPath) : opt.scratchParent;
-  removeStaleTemporaries(scratchParent, ".scanatlas-chunks-");
-  removeStaleTemporaries(directoryOf(outPath), std::filesystem::path(outPath).filename().string() + ".tmp-");
-  ScratchDir scratch;
-  SA_RETURN_IF_ERROR(scratch.create(scratchParent, ".scanatlas-chunks-"));
-  DistributeOptions dopt;
-  dopt.maxPointsPerChunk = std::max<uint64_t>(1024, opt.memBudget / kBytesPerPointInFlight);
-  dopt.scratchDir = scratch.path();
-  dopt.origin = origin;
-  dopt.keepTriangles = triangles;
-  DistributeResult dist;
-  SA_RETURN_IF_ERROR(distributePoints(input, qz, dopt, dist, progress));
-  sum.triangles = dist.triangles;
-  sum.chunks = static_cast<uint32_t>(dist.chunks.size());
-  sum.seconds[1] = secondsSince(t0);
-  if (triangles && dist.triangles == 0) {
-    return Status::badInput(input.files()[0].path + ": face element holds no triangles; use --as-points");
-  }
-
-  // ---- pass A: normals + octree per chunk ----
-  t0 = Clock::now();
-  std::vector<WorkCell> cells;
-  std::vector<uint32_t> vertexCell;
-  if (triangles) vertexCell.assign(dist.vertexPos.size() / 3, UINT32_MAX);
-  double spacingSum = 0;
-  uint64_t spacingWeight = 0;
-  uint64_t processed = 0;
-  const uint64_t total = bounds.count;
-  std::vector<ChunkPoint> pts;
-  std::vector<double> pos;
-  std::vector<float> nrm;
-  NormalOrientation orient;
-  orient.towardScanner = input.towardScanner();
-  orient.center = bounds.centroid - origin;
-  for (uint32_t ci = 0; ci < dist.chunks.size(); ++ci) {
-    const ChunkInfo& ch = dist.chunks[ci];
-    SA_RETURN_IF_ERROR(loadChunk(ch, pts));
-    decodePositions(pts, qz, pos);
-    const size_t n = pts.size();
-    nrm.assign(3 * n, 0.f);
-    if (fileNormals) {
-      for (size_t i = 0; i < n; ++i) std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
-    } else if (triangles) {
-      for (size_t i = 0; i < n; ++i) {
-        const size_t v = pts[i].vid;
-        if (3 * v + 2 < dist.vertexNormal.size()) {
-          Eigen::Vector3f nn(&dist.vertexNormal[3 * v]);
-          if (nn.norm() > 0) nn.normalize();
-          std::copy(nn.data(), nn.data() + 3, &nrm[3 * i]);
-        }
-      }
-    } else {
-      orient.scan = &pts[0].scan;
-      orient.scanStride = sizeof(ChunkPoint);
-      estimateNormals(pos.data(), n, opt.normalNeighbours, orient, nrm.data());
-    }
-    const double sp = estimateSpacing(pos.data(), n);
-    if (sp > 0) {
-      spacingSum += sp * double(n);
-      spacingWeight += n;
-    }
-    std::vector<uint32_t> idx(n);
-    for (uint32_t i = 0; i < n; ++i) idx[i] = i;
-    Eigen::Vector3d cmin;
-    double csize;
-    nodeCube(qz, ch.level, ch.ix, ch.iy, ch.iz, cmin, csize);
-    std::vector<OctreeCell> oc;
-    OctreeParams op = opt.octree;
-    op.maxDepth = std::max(op.maxDepth, ch.level);
-    buildOctree(pos.data(), nrm.data(), idx, cmin, csize, ch.level, op, oc);
-    // Rewrite the chunk in cell order with its normals, for pass B.
-    std::vector<ChunkPoint> sorted(n);
-    for (size_t i = 0; i < n; ++i) {
-      sorted[i] = pts[idx[i]];
-      std::copy(&nrm[3 * size_t(idx[i])], &nrm[3 * size_t(idx[i])] + 3, sorted[i].n);
-    }
-    SA_RETURN_IF_ERROR(saveChunk(ch.path, sorted));
-    for (const OctreeCell& c : oc) {
-      WorkCell wc;
-      wc.chunk = ci;
-      wc.first = c.first;
-      wc.count = c.count;
-      const PlaneFit& f = c.fit;
-      for (int a = 0; a < 3; ++a) {
-        wc.rec.origin[a] = f.centroid[a];
-        wc.rec.u[a] = f.u[a];
-        wc.rec.v[a] = f.v[a];
-        wc.rec.w[a] = f.w[a];
-      }
-      wc.rec.level = static_cast<uint8_t>(std::min(c.level, 255));
-      wc.rec.flags = (c.forced ? kCellForced : 0) | (f.degenerate ? kCellDegenerate : 0);
-      wc.rec.pointCount = c.count;
-      double e[6] = {1e300, -1e300, 1e300, -1e300, 1e300, -1e300};
-      for (uint32_t k = c.first; k < c.first + c.count; ++k) {
-        const Eigen::Vector3d d = vec(&pos[3 * size_t(idx[k])]) - f.centroid;
-        const double uvw[3] = {d.dot(f.u), d.dot(f.v), d.dot(f.w)};
-        for (int a = 0; a < 3; ++a) {
-          e[2 * a] = std::min(e[2 * a], uvw[a]);
-          e[2 * a + 1] = std::max(e[2 * a + 1], uvw[a]);
-        }
-        if (triangles) vertexCell[sorted[k].vid] = static_cast<uint32_t>(cells.size());
-      }
-      std::copy(e, e + 6, wc.ext);
-      cells.push_back(wc);
-    }
-    processed += n;
-    if (progress) progress("octree", processed, total);
-  }
-  pts.clear(); pts.shrink_to_fit();
-  sum.seconds[2] = secondsSince(t0);
-  if (cells.empty()) return Status::badInput(input.files()[0].path + ": no cells produced");
-  if (cells.size() > 16u << 20) return Status::badInput("more than 16 Mi cells; lower --max-depth");
-
-  // ---- texel size, tiles, atlas layout ----
-  t0 = Clock::now();
-  sum.spacing = spacingWeight ? spacingSum / double(spacingWeight) : qz.cubeSize * 1e-3;
-  if (!(sum.spacing > 0)) sum.spacing = qz.cubeSize * 1e-3;
-  const double cover = opt.coverageRadius * sum.spacing;
-  // Triangles need no coverage radius (their own extent is the coverage), but a texel of
-  // padding keeps neighbouring cells' edges from leaving cracks.
-  double t = opt.texelSize > 0 ? opt.texelSize : sum.spacing * opt.texelPerSpacing;
-  const double padUV = triangles ? 0.0 : cover;
-  double area = 0;
-  for (const WorkCell& c : cells)
-    area += (c.ext[1] - c.ext[0] + 2 * padUV + t) * (c.ext[3] - c.ext[2] + 2 * padUV + t);
-  if (opt.texelSize <= 0) t = std::max(t, std::sqrt(area / double(opt.texelBudget)));
-  const uint32_t maxTile = opt.maxPageSize - 2;
-  // Triangles that touch a cell reach up to an edge length past its vertices: pad the tile
-  // by that much (about 1.5 sample spacings) so neighbouring cells' coverage overlaps.
-  double triPad = std::max(t, 1.5 * sum.spacing);
-  std::vector<TileSize> sizes(cells.size());
-  for (int iter = 0; iter < 40; ++iter) {
-    uint64_t texels = 0;
-    for (size_t i = 0; i < cells.size(); ++i) {
-      const WorkCell& c = cells[i];
-      const double pad = triangles ? triPad : padUV;
-      const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
-      sizes[i].w = static_cast<uint32_t>(std::clamp(std::ceil(eu / t), 1.0, double(maxTile)));
-      sizes[i].h = static_cast<uint32_t>(std::clamp(std::ceil(ev / t), 1.0, double(maxTile)));
-      texels += uint64_t(sizes[i].w) * sizes[i].h;
-    }
-    sum.texels = texels;
-    if (texels <= opt.texelBudget || opt.texelSize > 0) break;
-    t *= std::sqrt(double(texels) / double(opt.texelBudget)) * 1.01;
-    triPad = std::max(t, 1.5 * sum.spacing);
-  }
-  sum.texelSize = t;
-  uint64_t withGutters = 0;
-  uint32_t largest = 1;
-  for (const TileSize& s : sizes) {
-    withGutters += uint64_t(s.w + 2) * (s.h + 2);
-    largest = std::max({largest, s.w, s.h});
-  }
-  const uint32_t pageSize = choosePageSize(withGutters, largest, opt.maxPageSize);
-  PackingResult layout = packTiles(sizes, pageSize);
-  std::vector<CellRecord> records(cells.size());
-  for (size_t i = 0; i < cells.size(); ++i) {
-    WorkCell& c = cells[i];
-    CellRecord& r = c.rec;
-    const double pad = triangles ? triPad : padUV;
-    const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
-    // The tile spans the box exactly: widen the box to whole texels, centred on the points.
-    const double su = std::max(sizes[i].w * t, eu), sv = std::max(sizes[i].h * t, ev);
-    const double cu = (c.ext[0] + c.ext[1]) / 2, cv = (c.ext[2] + c.ext[3]) / 2;
-    const double wpad = std::max(0.5 * t, 1e-9 * qz.cubeSize);
-    r.box[0] = cu - su / 2; r.box[1] = cu + su / 2;
-    r.box[2] = cv - sv / 2; r.box[3] = cv + sv / 2;
-    r.box[4] = c.ext[4] - wpad; r.box[5] = c.ext[5] + wpad;
-    r.page = layout.placements[i].page;
-    r.tileX = layout.placements[i].x;
-    r.tileY = layout.placements[i].y;
-    r.tileW = static_cast<uint16_t>(sizes[i].w);
-    r.tileH = static_cast<uint16_t>(sizes[i].h);
-    records[i] = r;
-    if (r.level >= sum.cellsPerLevel.size()) sum.cellsPerLevel.resize(r.level + 1, 0);
-    ++sum.cellsPerLevel[r.level];
-    if (r.flags & kCellForced) ++sum.forcedCells;
-    if (r.flags & kCellDegenerate) ++sum.degenerateCells;
-  }
-  sum.cells = static_cast<uint32_t>(cells.size());
-  sum.pages = layout.pageCount;
-  sum.pageSize = pageSize;
-
-  PackMeta meta{};
-  for (int a = 0; a < 3; ++a) {
-    meta.origin[a] = origin[a];
-    meta.boundsMin[a] = bounds.min[a] - origin[a];
-    meta.boundsMax[a] = bounds.max[a] - origin[a];
-  }
-  meta.texelSize = t;
-  meta.sampleSpacing = sum.spacing;
-  meta.sourcePoints = bounds.count;
-  meta.skippedPoints = bounds.skipped;
-  meta.sourceTriangles = dist.triangles;
-  meta.pageSize = pageSize;
-  meta.pageCount = layout.pageCount;
-  meta.flags = (color && !triangles ? uint32_t(kPackHasColor) : 0u) | (triangles ? uint32_t(kPackFromTriangles) : 0u) |
-               (sum.normalsEstimated ? uint32_t(kPackNormalsEstimated) : 0u);
-  meta.maxDepth = static_cast<uint32_t>(opt.octree.maxDepth);
-  meta.chunkCount = sum.chunks;
-  meta.texelsUsed = sum.texels;
-  meta.inputHash = sum.inputHash;
-  // NOTE (FORMAT.md): one "source: <path>" line per input, then the command line.
-  std::string note;
-  for (const auto& f : input.sourcePaths()) note += "source: " + f + "\n";
-  for (const auto& f : input.files())
-    if (!f.columns.empty()) {
-      note += "columns: " + f.columns + "\n";
-      break;
-    }
-  note += "command: " + opt.commandLine + "\n";
+  PackJob job(input, opt, progress, sum);
+  job.triangles = input.hasTriangles() && !opt.asPoints;
+  job.fileNormals = input.allHaveNormals();
+  sum.fromTriangles = job.triangles;
+  sum.normalsEstimated = !job.fileNormals && !job.triangles;
+  SA_RETURN_IF_ERROR(boundsPhase(job));
+  sum.hasColor = job.color && !job.triangles;
+  SA_RETURN_IF_ERROR(distributePhase(job, outPath));
+  SA_RETURN_IF_ERROR(cellsPhase(job));
+  upPhase(job);
+  const auto t0 = Clock::now();
+  if (job.triangles) SA_RETURN_IF_ERROR(assignPhase(job));
+  layoutPhase(job);
+  job.meta = makeMeta(job);
   PackWriter writer;
-  SA_RETURN_IF_ERROR(writer.open(outPath, meta, records, note));
-  const bool writeColor = (meta.flags & kPackHasColor) != 0;
-
-  // ---- pass B: height maps per chunk ----
-  std::vector<std::vector<uint32_t>> chunkCells(dist.chunks.size());
-  for (uint32_t i = 0; i < cells.size(); ++i) chunkCells[cells[i].chunk].push_back(i);
-  processed = 0;
-  for (uint32_t ci = 0; ci < dist.chunks.size(); ++ci) {
-    SA_RETURN_IF_ERROR(loadChunk(dist.chunks[ci], pts));
-    decodePositions(pts, qz, pos);
-    // Triangle path: the triangles touching each cell of this chunk.
-    std::unordered_map<uint32_t, std::vector<uint32_t>> cellTris;
-    if (triangles) {
-      std::FILE* f = std::fopen(dist.trianglePath.c_str(), "rb");
-      if (!f) return Status::internal(dist.trianglePath + ": cannot reopen");
-      std::vector<uint32_t> buf(3 * 65536);
-      size_t got;
-      uint64_t triIndex = 0;
-      while ((got = std::fread(buf.data(), 12, buf.size() / 3, f)) > 0) {
-        for (size_t k = 0; k < got; ++k, ++triIndex) {
-          uint32_t cs[3];
-          for (int j = 0; j < 3; ++j) {
-            const uint32_t v = buf[3 * k + j];
-            cs[j] = v < vertexCell.size() ? vertexCell[v] : UINT32_MAX;
-          }
-          for (int j = 0; j < 3; ++j) {
-            if (cs[j] == UINT32_MAX || cells[cs[j]].chunk != ci) continue;
-            if ((j > 0 && cs[j] == cs[0]) || (j > 1 && cs[j] == cs[1])) continue;
-            auto& list = cellTris[cs[j]];
-            list.push_back(buf[3 * k]);
-            list.push_back(buf[3 * k + 1]);
-            list.push_back(buf[3 * k + 2]);
-          }
-        }
-      }
-      std::fclose(f);
-    }
-    const auto& mine = chunkCells[ci];
-    Status failed;
-    std::mutex failMu;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
-      std::vector<double> u, v, w, tri;
-      std::vector<uint8_t> rgb;
-      TileOutput tile;
-      for (size_t m = rr.begin(); m < rr.end(); ++m) {
-        const uint32_t id = mine[m];
-        const WorkCell& c = cells[id];
-        CellRecord& r = records[id];
-        const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
-        TileGrid g;
-        g.width = r.tileW;
-        g.height = r.tileH;
-        g.u0 = r.box[0];
-        g.v0 = r.box[2];
-        g.du = (r.box[1] - r.box[0]) / r.tileW;
-        g.dv = (r.box[3] - r.box[2]) / r.tileH;
-        g.wMin = r.box[4];
-        g.wMax = r.box[5];
-        if (triangles) {
-          auto it = cellTris.find(id);
-          tri.clear();
-          if (it != cellTris.end()) {
-            for (uint32_t vi : it->second) {
-              const Eigen::Vector3d d = vec(&dist.vertexPos[3 * size_t(vi)]) - O;
-              tri.push_back(d.dot(U));
-              tri.push_back(d.dot(V));
-              tri.push_back(d.dot(Wn));
-            }
-          }
-          // The box's height range grows to hold the whole of every triangle touching the
-          // cell (within the padding), so the parts of those triangles outside the cell's
-          // own vertices are not cut where the neighbouring box does not reach either.
-          double wLo = r.box[4], wHi = r.box[5];
-          const double reach = std::max(r.box[1] - r.box[0], r.box[3] - r.box[2]);
-          for (size_t k = 2; k < tri.size(); k += 3) {
-            wLo = std::min(wLo, std::max(tri[k], r.box[4] - reach));
-            wHi = std::max(wHi, std::min(tri[k], r.box[5] + reach));
-          }
-          r.box[4] = wLo;
-          r.box[5] = wHi;
-          g.wMin = wLo;
-          g.wMax = wHi;
-          writer.setCellHeights(id, wLo, wHi);
-          rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * t, tile);
-        } else {
-          u.resize(c.count); v.resize(c.count); w.resize(c.count);
-          rgb.resize(writeColor ? 3 * size_t(c.count) : 0);
-          for (uint32_t k = 0; k < c.count; ++k) {
-            const size_t pi = size_t(c.first) + k;
-            const Eigen::Vector3d d = vec(&pos[3 * pi]) - O;
-            u[k] = d.dot(U); v[k] = d.dot(V); w[k] = d.dot(Wn);
-            if (writeColor) std::copy(pts[pi].rgb, pts[pi].rgb + 3, &rgb[3 * size_t(k)]);
-          }
-          pullPushTile(g, u.data(), v.data(), w.data(), writeColor ? rgb.data() : nullptr, c.count, cover, tile);
-        }
-        Status s = writer.writeTile(id, tile.heights.data(), writeColor ? tile.rgba.data() : nullptr);
-        if (!s) {
-          std::lock_guard<std::mutex> lock(failMu);
-          failed = s;
-        }
-      }
-    });
-    SA_RETURN_IF_ERROR(failed);
-    processed += pts.size();
-    if (progress) progress("heightmaps", processed, total);
-  }
-  sum.seconds[3] = secondsSince(t0);
-  t0 = Clock::now();
+  SA_RETURN_IF_ERROR(writer.open(outPath, job.meta, job.records, makeNote(job)));
+  SA_RETURN_IF_ERROR(tilesPhase(job, writer));
+  sum.seconds[3] = secondsSince(t0);  // layout included
+  const auto tw = Clock::now();
   if (progress) progress("write", 0, 1);
-  meta.seconds[0] = sum.seconds[0];
-  meta.seconds[1] = sum.seconds[1];
-  meta.seconds[2] = sum.seconds[2];
-  meta.seconds[3] = sum.seconds[3];
-  meta.seconds[5] = secondsSince(tStart);
-  writer.setMeta(meta);
+  for (int i = 0; i < 4; ++i) job.meta.seconds[i] = sum.seconds[i];
+  job.meta.seconds[5] = secondsSince(tStart);
+  writer.setMeta(job.meta);
   SA_RETURN_IF_ERROR(writer.finish());
-  sum.seconds[4] = secondsSince(t0);
+  sum.seconds[4] = secondsSince(tw);
   sum.seconds[5] = secondsSince(tStart);
   if (progress) progress("write", 1, 1);
   auto sz = fileSize(outPath);

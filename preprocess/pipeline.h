@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "formats/source.h"
 #include "preprocess/chunker.h"
 #include "preprocess/octree.h"
@@ -16,10 +18,14 @@ struct PackOptions {
   uint64_t texelBudget = uint64_t(64) << 20;  // texels over all tiles
   double texelSize = 0;           // world units; 0 = from sample spacing and budget
   double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
-  double coverageRadius = 1.5;    // in sample spacings: farther texels stay empty
+  double coverageRadius = 1.5;    // in sample spacings: texels whose surface point is farther stay empty
+  double splatRadius = 1.0;       // in sample spacings: the point splat kernel
+  double outlierRatio = 3;        // local outlier test of point inputs (0: keep every point)
+  bool smooth = true;             // point inputs: moving-least-squares smoothing
   bool asPoints = false;          // ignore faces: pull-push from the vertices
   bool strict = false;            // NaN/Inf coordinates are an error instead of skipped
   bool force = false;             // repack even when the output is up to date
+  Eigen::Vector3d up = Eigen::Vector3d::Zero();  // zero: from the format's convention or the data
   OctreeParams octree;
   int normalNeighbours = 24;
   uint32_t maxPageSize = 4096;
@@ -28,13 +34,16 @@ struct PackOptions {
 };
 
 struct PackSummary {
-  uint64_t pointsRead = 0, pointsSkipped = 0, triangles = 0;
-  uint32_t cells = 0, forcedCells = 0, degenerateCells = 0, pages = 0, pageSize = 0, chunks = 0;
+  uint64_t pointsRead = 0, pointsSkipped = 0, triangles = 0, outliersRemoved = 0, surfaceSamples = 0;
+  uint32_t cells = 0, forcedCells = 0, degenerateCells = 0, layeredCells = 0, pages = 0, chunks = 0;
+  uint32_t pageWidth = 0, pageHeight = 0;
   uint64_t texels = 0, fileBytes = 0;
   double spacing = 0, texelSize = 0;
   double seconds[6] = {0, 0, 0, 0, 0, 0};
   std::vector<uint32_t> cellsPerLevel;
   bool normalsEstimated = false, fromTriangles = false, hasColor = false;
+  Eigen::Vector3d up = Eigen::Vector3d::Zero();
+  uint32_t upSource = 0;  // UpSource (atlas/pack_format.h)
   bool upToDate = false;  // the output already held this pack (same input hash): nothing done
   uint64_t inputHash = 0;
   double hashSeconds = 0;

@@ -12,9 +12,9 @@ namespace {
 
 struct Level {
   int w = 0, h = 0;
-  std::vector<float> weight;   // clamped to [0, 1] after the pull
-  std::vector<double> value;   // height
-  std::vector<float> color;    // rgb, when present
+  std::vector<float> weight;   // clamped to [0, 1] after normalizing
+  std::vector<double> value;   // height (residual of the trend)
+  std::vector<float> attr;     // nAttr channels per texel: colour (3) then normal (3), as present
 };
 
 // Least-squares quadratic w = q(u, v) over the samples, in coordinates normalised to the
@@ -61,42 +61,20 @@ Quadric fitQuadric(const TileGrid& g, const double* u, const double* v, const do
   return q;
 }
 
-}  // namespace
-
-void pullPushTile(const TileGrid& g, const double* u, const double* v, const double* w, const uint8_t* rgb,
-                  size_t n, double coverageRadius, TileOutput& out) {
+// Coverage in 3-D: a texel is covered when its reconstructed surface point (texel centre,
+// surface height) lies within `radius` of a sample. A 2-D test (distance in the plane) would
+// cover the interpolation across a height jump (roof to ground, deck to water, canopy to
+// ground), which is surface where no point is; in 3-D such jumps stay open, as holes do.
+// Stamped per sample over the texels of its disk, row by row.
+std::vector<uint8_t> coverage3d(const TileGrid& g, const double* u, const double* v, const double* w, size_t n,
+                                const std::vector<double>& surface, double radius) {
   const int W = g.width, H = g.height;
-  const bool hasColor = rgb != nullptr;
-  std::vector<Level> lv(1);
-  lv[0].w = W; lv[0].h = H;
-  lv[0].weight.assign(size_t(W) * H, 0.f);
-  lv[0].value.assign(size_t(W) * H, 0.0);
-  if (hasColor) lv[0].color.assign(size_t(W) * H * 3, 0.f);
   std::vector<uint8_t> covered(size_t(W) * H, 0);
-  const Quadric trend = fitQuadric(g, u, v, w, n);
-  const double ru = coverageRadius / g.du, rv = coverageRadius / g.dv;
+  const double ru = radius / g.du, rv = radius / g.dv, r2 = radius * radius;
   const int riv = static_cast<int>(std::ceil(rv));
-  // Coverage disks are stamped row by row: one square root per row, then a fill.
-  // Splat: bilinear weights onto the four nearest texel centres (the finest level).
   for (size_t s = 0; s < n; ++s) {
     const double fx = (u[s] - g.u0) / g.du - 0.5, fy = (v[s] - g.v0) / g.dv - 0.5;
-    if (!(fx > -1.0 && fy > -1.0 && fx < W && fy < H)) continue;
-    const int ix = static_cast<int>(std::floor(fx)), iy = static_cast<int>(std::floor(fy));
-    const double ax = fx - ix, ay = fy - iy;
-    for (int dy = 0; dy < 2; ++dy) {
-      for (int dx = 0; dx < 2; ++dx) {
-        const int x = ix + dx, y = iy + dy;
-        if (x < 0 || y < 0 || x >= W || y >= H) continue;
-        const double wt = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
-        if (wt <= 0) continue;
-        const size_t t = size_t(y) * W + x;
-        lv[0].weight[t] += float(wt);
-        lv[0].value[t] += wt * (w[s] - trend(u[s], v[s]));
-        if (hasColor)
-          for (int c = 0; c < 3; ++c) lv[0].color[3 * t + c] += float(wt * rgb[3 * s + c]);
-      }
-    }
-    // Coverage: every texel centre within the radius of this sample.
+    if (!(fx > -ru - 1 && fy > -rv - 1 && fx < W + ru && fy < H + rv)) continue;
     const int cy = static_cast<int>(std::lround(fy));
     for (int y = std::max(0, cy - riv - 1); y <= std::min(H - 1, cy + riv + 1); ++y) {
       const double dy = (y - fy) / rv;
@@ -105,120 +83,245 @@ void pullPushTile(const TileGrid& g, const double* u, const double* v, const dou
       const double half = std::sqrt(span) * ru;  // the disk's half-width on this row
       const int x0 = std::max(0, static_cast<int>(std::ceil(fx - half)));
       const int x1 = std::min(W - 1, static_cast<int>(std::floor(fx + half)));
-      if (x0 <= x1) std::fill(covered.begin() + (size_t(y) * W + x0), covered.begin() + (size_t(y) * W + x1 + 1), 1);
-    }
-  }
-  auto normalize = [&](Level& L) {
-    for (size_t t = 0; t < L.weight.size(); ++t) {
-      if (L.weight[t] > 0) {
-        L.value[t] /= L.weight[t];
-        if (hasColor)
-          for (int c = 0; c < 3; ++c) L.color[3 * t + c] /= L.weight[t];
-        L.weight[t] = std::min(L.weight[t], 1.f);
+      const double dv2 = std::pow((y - fy) * g.dv, 2);
+      for (int x = x0; x <= x1; ++x) {
+        const size_t t = size_t(y) * W + x;
+        if (covered[t] || std::isnan(surface[t])) continue;
+        const double dh = surface[t] - w[s];
+        covered[t] = std::pow((x - fx) * g.du, 2) + dv2 + dh * dh <= r2;
       }
     }
+  }
+  return covered;
+}
+
+}  // namespace
+
+namespace {
+
+// The samples' attribute channels (colour, then normal) as floats.
+struct Channels {
+  int count = 0, color = -1, normal = -1;
+  explicit Channels(const TileSamples& s) {
+    if (s.rgb) color = count, count += 3;
+    if (s.normal) normal = count, count += 3;
+  }
+  void add(const TileSamples& s, size_t i, double wt, float* dst) const {
+    if (color >= 0)
+      for (int k = 0; k < 3; ++k) dst[color + k] += float(wt * s.rgb[3 * i + k]);
+    if (normal >= 0)
+      for (int k = 0; k < 3; ++k) dst[normal + k] += float(wt * s.normal[3 * i + k]);
+  }
+};
+
+Level makeLevel(int w, int h, int channels) {
+  Level L;
+  L.w = w;
+  L.h = h;
+  L.weight.assign(size_t(w) * h, 0.f);
+  L.value.assign(size_t(w) * h, 0.0);
+  L.attr.assign(size_t(w) * h * channels, 0.f);
+  return L;
+}
+
+// Splat into the finest level: a smooth compact kernel of radius r (world units), or bilinear
+// weights onto the four nearest texel centres when r is under a texel.
+void splat(const TileGrid& g, const TileSamples& s, const Quadric& trend, double r, const Channels& ch, Level& L) {
+  const int W = g.width, H = g.height, C = ch.count;
+  auto add = [&](size_t i, int x, int y, double wt) {
+    const size_t t = size_t(y) * W + x;
+    L.weight[t] += float(wt);
+    L.value[t] += wt * (s.w[i] - trend(s.u[i], s.v[i]));
+    if (C) ch.add(s, i, wt, &L.attr[t * C]);
   };
-  normalize(lv[0]);
-  // Pull: average 2x2 children with their weights into coarser levels.
-  while (lv.back().w > 1 || lv.back().h > 1) {
-    const Level& f = lv.back();
-    Level c;
-    c.w = (f.w + 1) / 2;
-    c.h = (f.h + 1) / 2;
-    c.weight.assign(size_t(c.w) * c.h, 0.f);
-    c.value.assign(size_t(c.w) * c.h, 0.0);
-    if (hasColor) c.color.assign(size_t(c.w) * c.h * 3, 0.f);
-    for (int y = 0; y < f.h; ++y) {
-      for (int x = 0; x < f.w; ++x) {
-        const size_t ft = size_t(y) * f.w + x, ct = size_t(y / 2) * c.w + x / 2;
-        const float wt = f.weight[ft];
-        if (wt <= 0) continue;
-        c.weight[ct] += wt;
-        c.value[ct] += wt * f.value[ft];
-        if (hasColor)
-          for (int k = 0; k < 3; ++k) c.color[3 * ct + k] += wt * f.color[3 * ft + k];
-      }
-    }
-    normalize(c);
-    lv.push_back(std::move(c));
-  }
-  // Push: fill each level's weak texels from the coarser level (bilinear).
-  for (int l = static_cast<int>(lv.size()) - 2; l >= 0; --l) {
-    Level& f = lv[size_t(l)];
-    const Level& c = lv[size_t(l) + 1];
-    for (int y = 0; y < f.h; ++y) {
-      for (int x = 0; x < f.w; ++x) {
-        const size_t ft = size_t(y) * f.w + x;
-        const float wt = f.weight[ft];
-        if (wt >= 1.f) continue;
-        // Position of this texel centre in the coarse grid.
-        const double cx = std::clamp((x + 0.5) / 2.0 - 0.5, 0.0, double(c.w - 1));
-        const double cy = std::clamp((y + 0.5) / 2.0 - 0.5, 0.0, double(c.h - 1));
-        const int x0 = static_cast<int>(cx), y0 = static_cast<int>(cy);
-        const int x1 = std::min(x0 + 1, c.w - 1), y1 = std::min(y0 + 1, c.h - 1);
-        const double ax = cx - x0, ay = cy - y0;
-        double val = 0, col[3] = {0, 0, 0}, ws = 0;
-        const int xs[2] = {x0, x1}, ys[2] = {y0, y1};
-        for (int j = 0; j < 2; ++j) {
-          for (int i = 0; i < 2; ++i) {
-            const size_t ct = size_t(ys[j]) * c.w + xs[i];
-            const double bw = (i ? ax : 1 - ax) * (j ? ay : 1 - ay) * c.weight[ct];
-            ws += bw;
-            val += bw * c.value[ct];
-            if (hasColor)
-              for (int k = 0; k < 3; ++k) col[k] += bw * c.color[3 * ct + k];
-          }
+  const bool kernel = r >= std::max(g.du, g.dv);
+  const double rx = r / g.du, ry = r / g.dv;
+  for (size_t i = 0; i < s.n; ++i) {
+    const double fx = (s.u[i] - g.u0) / g.du - 0.5, fy = (s.v[i] - g.v0) / g.dv - 0.5;
+    if (!kernel) {
+      if (!(fx > -1.0 && fy > -1.0 && fx < W && fy < H)) continue;
+      const int ix = static_cast<int>(std::floor(fx)), iy = static_cast<int>(std::floor(fy));
+      const double ax = fx - ix, ay = fy - iy;
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+          const int x = ix + dx, y = iy + dy;
+          const double wt = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
+          if (x >= 0 && y >= 0 && x < W && y < H && wt > 0) add(i, x, y, wt);
         }
-        if (ws <= 0) continue;
-        f.value[ft] = wt * f.value[ft] + (1 - wt) * val / ws;
-        if (hasColor)
-          for (int k = 0; k < 3; ++k) f.color[3 * ft + k] = float(wt * f.color[3 * ft + k] + (1 - wt) * col[k] / ws);
-        f.weight[ft] = 1.f;
-      }
+      continue;
     }
-  }
-  out.heights.assign(size_t(W) * H, 0);
-  out.rgba.assign(hasColor ? size_t(W) * H * 4 : 0, 0);
-  out.covered = 0;
-  const Level& L = lv[0];
-  for (size_t t = 0; t < out.heights.size(); ++t) {
-    if (!covered[t] || L.weight[t] <= 0) continue;
-    const int i = static_cast<int>(t % size_t(W)), j = static_cast<int>(t / size_t(W));
-    out.heights[t] = encodeHeight(L.value[t] + trend(g.u0 + (i + 0.5) * g.du, g.v0 + (j + 0.5) * g.dv), g.wMin, g.wMax);
-    ++out.covered;
-    if (hasColor) {
-      for (int k = 0; k < 3; ++k)
-        out.rgba[4 * t + k] = static_cast<uint8_t>(std::clamp(std::lround(L.color[3 * t + k]), 0L, 255L));
-      out.rgba[4 * t + 3] = 255;
+    if (!(fx > -rx - 1 && fy > -ry - 1 && fx < W + rx && fy < H + ry)) continue;
+    const int y0 = std::max(0, static_cast<int>(std::ceil(fy - ry))), y1 = std::min(H - 1, static_cast<int>(std::floor(fy + ry)));
+    const int x0 = std::max(0, static_cast<int>(std::ceil(fx - rx))), x1 = std::min(W - 1, static_cast<int>(std::floor(fx + rx)));
+    for (int y = y0; y <= y1; ++y) {
+      const double dy = (y - fy) / ry;
+      for (int x = x0; x <= x1; ++x) {
+        const double dx = (x - fx) / rx, q = 1 - dx * dx - dy * dy;
+        if (q > 0) add(i, x, y, q * q);
+      }
     }
   }
 }
 
-void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, TileOutput& out) {
+// Divides the sums by the weights; a weight of `full` or more is full confidence (1).
+void normalize(Level& L, int C, float full) {
+  for (size_t t = 0; t < L.weight.size(); ++t) {
+    if (L.weight[t] <= 0) continue;
+    L.value[t] /= L.weight[t];
+    for (int k = 0; k < C; ++k) L.attr[t * C + k] /= L.weight[t];
+    L.weight[t] = std::min(L.weight[t] / full, 1.f);
+  }
+}
+
+// Pull: average 2x2 children with their weights into the next coarser level.
+Level pull(const Level& f, int C) {
+  Level c = makeLevel((f.w + 1) / 2, (f.h + 1) / 2, C);
+  for (int y = 0; y < f.h; ++y)
+    for (int x = 0; x < f.w; ++x) {
+      const size_t ft = size_t(y) * f.w + x, ct = size_t(y / 2) * c.w + x / 2;
+      const float wt = f.weight[ft];
+      if (wt <= 0) continue;
+      c.weight[ct] += wt;
+      c.value[ct] += wt * f.value[ft];
+      for (int k = 0; k < C; ++k) c.attr[ct * C + k] += wt * f.attr[ft * C + k];
+    }
+  normalize(c, C, 1.f);
+  return c;
+}
+
+// Push: fill a level's weak texels from the coarser level (bilinear).
+void push(Level& f, const Level& c, int C) {
+  std::vector<double> acc(static_cast<size_t>(C));
+  for (int y = 0; y < f.h; ++y)
+    for (int x = 0; x < f.w; ++x) {
+      const size_t ft = size_t(y) * f.w + x;
+      const float wt = f.weight[ft];
+      if (wt >= 1.f) continue;
+      // Position of this texel centre in the coarse grid.
+      const double cx = std::clamp((x + 0.5) / 2.0 - 0.5, 0.0, double(c.w - 1));
+      const double cy = std::clamp((y + 0.5) / 2.0 - 0.5, 0.0, double(c.h - 1));
+      const int x0 = static_cast<int>(cx), y0 = static_cast<int>(cy);
+      const int xs[2] = {x0, std::min(x0 + 1, c.w - 1)}, ys[2] = {y0, std::min(y0 + 1, c.h - 1)};
+      const double ax = cx - x0, ay = cy - y0;
+      double val = 0, ws = 0;
+      std::fill(acc.begin(), acc.end(), 0.0);
+      for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+          const size_t ct = size_t(ys[j]) * c.w + xs[i];
+          const double bw = (i ? ax : 1 - ax) * (j ? ay : 1 - ay) * c.weight[ct];
+          ws += bw;
+          val += bw * c.value[ct];
+          for (int k = 0; k < C; ++k) acc[size_t(k)] += bw * c.attr[ct * C + k];
+        }
+      if (ws <= 0) continue;
+      f.value[ft] = wt * f.value[ft] + (1 - wt) * val / ws;
+      for (int k = 0; k < C; ++k) f.attr[ft * C + k] = float(wt * f.attr[ft * C + k] + (1 - wt) * acc[size_t(k)] / ws);
+      f.weight[ft] = 1.f;
+    }
+}
+
+}  // namespace
+
+void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& opt, TileOutput& out) {
+  const int W = g.width, H = g.height;
+  const Channels ch(s);
+  const int C = ch.count;
+  const Quadric trend = fitQuadric(g, s.u, s.v, s.w, s.n);
+  std::vector<Level> lv;
+  lv.push_back(makeLevel(W, H, C));
+  splat(g, s, trend, opt.splatRadius, ch, lv[0]);
+  // With the kernel, a texel a sample reaches at half the radius or nearer is fully known.
+  const bool kernel = opt.splatRadius >= std::max(g.du, g.dv);
+  normalize(lv[0], C, kernel ? 0.5625f : 1.f);
+  while (lv.back().w > 1 || lv.back().h > 1) lv.push_back(pull(lv.back(), C));
+  for (int l = static_cast<int>(lv.size()) - 2; l >= 0; --l) push(lv[size_t(l)], lv[size_t(l) + 1], C);
+  // The reconstructed surface everywhere (push filled every texel the samples reach).
+  const Level& L = lv[0];
+  std::vector<double> surface(size_t(W) * H, NAN);
+  for (size_t t = 0; t < surface.size(); ++t) {
+    if (L.weight[t] <= 0) continue;
+    const int i = static_cast<int>(t % size_t(W)), j = static_cast<int>(t / size_t(W));
+    surface[t] = L.value[t] + trend(g.u0 + (i + 0.5) * g.du, g.v0 + (j + 0.5) * g.dv);
+  }
+  const std::vector<uint8_t> covered = coverage3d(g, s.u, s.v, s.w, s.n, surface, opt.coverageRadius);
+  out.heights.assign(size_t(W) * H, 0);
+  out.rgba.assign(ch.color >= 0 ? size_t(W) * H * 4 : 0, 0);
+  out.normals.assign(ch.normal >= 0 ? size_t(W) * H * 2 : 0, 0);
+  out.covered = 0;
+  for (size_t t = 0; t < out.heights.size(); ++t) {
+    if (!covered[t]) continue;
+    out.heights[t] = encodeHeight(surface[t], g.wMin, g.wMax);
+    ++out.covered;
+    const float* a = &L.attr[t * C];
+    if (ch.color >= 0) {
+      for (int k = 0; k < 3; ++k) out.rgba[4 * t + k] = static_cast<uint8_t>(std::clamp(std::lround(a[ch.color + k]), 0L, 255L));
+      out.rgba[4 * t + 3] = 255;
+    }
+    if (ch.normal >= 0) {
+      const float* n = a + ch.normal;
+      encodeNormal(n[0], n[1], std::max(n[2], 0.f), &out.normals[2 * t]);
+    }
+  }
+}
+
+void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, double minCos,
+                   bool normals, TileOutput& out) {
   const int W = g.width, H = g.height;
   std::vector<double> best(size_t(W) * H, -INFINITY);
-  for (size_t t = 0; t < triangleCount; ++t) {
-    const double* p = tris + 9 * t;
-    double x[3], y[3], z[3];
-    for (int k = 0; k < 3; ++k) {
-      x[k] = (p[3 * k] - g.u0) / g.du;
-      y[k] = (p[3 * k + 1] - g.v0) / g.dv;
-      z[k] = p[3 * k + 2];
+  std::vector<uint32_t> winner(best.size(), UINT32_MAX);
+  // Pass 0: texels whose centre lies inside a triangle, exactly. Pass 1: the texels a triangle
+  // touches within half a texel diagonal but whose centre no triangle holds, from the plane of
+  // the triangle continued there: coverage then has no sub-texel gaps along the edge of the
+  // triangles a cell holds, where a neighbouring cell takes over.
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<uint8_t> exact;
+    if (pass == 1) {
+      exact.resize(best.size());
+      for (size_t k = 0; k < best.size(); ++k) exact[k] = best[k] != -INFINITY;
     }
-    rasterizeTriangle(x, y, W, H, [&](int px, int py, double b0, double b1, double b2) {
-      const double wz = b0 * z[0] + b1 * z[1] + b2 * z[2];
-      if (wz < g.wMin - slack || wz > g.wMax + slack) return;
-      double& d = best[size_t(py) * W + px];
-      d = std::max(d, wz);
-    });
+    for (size_t t = 0; t < triangleCount; ++t) {
+      const double* p = tris + 9 * t;
+      // One-sided: a triangle facing away from +W (by its winding, as the mesh's vertex
+      // normals are), or nearly edge-on, is not part of this height field (the far side of a
+      // fold, the other face of an edge): kept, its largest w would cover the surface where
+      // the tile reaches past the cell's own vertices.
+      const Eigen::Vector3d e1(p[3] - p[0], p[4] - p[1], p[5] - p[2]), e2(p[6] - p[0], p[7] - p[1], p[8] - p[2]);
+      const Eigen::Vector3d fn = e1.cross(e2);
+      if (!(fn.z() > minCos * fn.norm())) continue;
+      double x[3], y[3], z[3];
+      for (int k = 0; k < 3; ++k) {
+        x[k] = (p[3 * k] - g.u0) / g.du;
+        y[k] = (p[3 * k + 1] - g.v0) / g.dv;
+        z[k] = p[3 * k + 2];
+      }
+      rasterizeTriangle(x, y, W, H, [&](int px, int py, double b0, double b1, double b2) {
+        const size_t k = size_t(py) * W + px;
+        if (pass == 1 && exact[k]) return;
+        const double wz = b0 * z[0] + b1 * z[1] + b2 * z[2];
+        if (wz < g.wMin - slack || wz > g.wMax + slack) return;
+        if (wz > best[k]) {
+          best[k] = wz;
+          winner[k] = static_cast<uint32_t>(t);
+        }
+      }, pass == 0 ? 0.0 : 0.7072);
+    }
   }
   out.heights.assign(size_t(W) * H, 0);
   out.rgba.clear();
+  out.normals.assign(normals ? size_t(W) * H * 2 : 0, 0);
   out.covered = 0;
   for (size_t t = 0; t < best.size(); ++t) {
     if (best[t] == -INFINITY) continue;
     out.heights[t] = encodeHeight(best[t], g.wMin, g.wMax);
     ++out.covered;
+    if (normals) {
+      // The face normal of the visible triangle: the mesh's own facet, as the reference
+      // renders it.
+      const double* p = tris + 9 * size_t(winner[t]);
+      const Eigen::Vector3d a(p[0], p[1], p[2]), b(p[3], p[4], p[5]), c(p[6], p[7], p[8]);
+      const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+      encodeNormal(n.x(), n.y(), n.z(), &out.normals[2 * t]);
+    }
   }
 }
 

@@ -1,7 +1,7 @@
-// Height maps from points by pull-push interpolation (Gortler et al. 1996, as used by Lu,
-// Low & Zheng §3.2.1), with a coverage mask: a texel is covered only if a sample lies within
-// `coverageRadius` of its centre, so holes and scan edges stay open. Also the triangle path:
-// exact rasterization of a mesh into the height map.
+// Height maps from points: the samples are splatted with a smooth kernel sized to the sample
+// spacing, holes between them are filled by pull-push interpolation (Gortler et al. 1996, as
+// used by Lu, Low & Zheng §3.2.1), and a coverage mask decided in 3-D keeps holes, scan edges
+// and height jumps open. Also the triangle path: exact rasterization of a mesh into the map.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -19,16 +19,39 @@ struct TileGrid {
 
 struct TileOutput {
   std::vector<uint16_t> heights;  // width * height; 0 = not covered
+  std::vector<uint8_t> normals;   // width * height * 2 (encodeNormal, frame components) when normals were given
   std::vector<uint8_t> rgba;      // width * height * 4 when colours were given
   size_t covered = 0;
 };
 
-// Samples in frame coordinates (u, v, w); rgb (3 per sample) may be null.
-void pullPushTile(const TileGrid& g, const double* u, const double* v, const double* w, const uint8_t* rgb,
-                  size_t n, double coverageRadius, TileOutput& out);
+// Samples of one cell in its frame. normal (3 per sample, frame components, unit) and rgb (3
+// per sample) may be null.
+struct TileSamples {
+  const double* u = nullptr;
+  const double* v = nullptr;
+  const double* w = nullptr;
+  const float* normal = nullptr;
+  const uint8_t* rgb = nullptr;
+  size_t n = 0;
+};
 
-// Triangles in frame coordinates (9 doubles each: u, v, w per vertex). Keeps the largest w
-// per texel (the surface seen from the +W side) within [wMin - slack, wMax + slack].
-void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, TileOutput& out);
+struct SplatOptions {
+  // Radius of the splat kernel (world units): each sample spreads over the texels within it
+  // with weight (1 - (d/r)^2)^2, so the surface between samples is a smooth weighted average
+  // rather than a bump per sample. 0: bilinear onto the four nearest texels.
+  double splatRadius = 0;
+  // A texel is covered when its reconstructed surface point lies within this 3-D distance of
+  // a sample.
+  double coverageRadius = 0;
+};
+
+void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& opt, TileOutput& out);
+
+// Triangles in frame coordinates (9 doubles each: u, v, w per vertex). Triangles facing +W
+// (counter-clockwise seen from +W) with a face normal whose W component is over minCos are
+// rasterized, keeping the largest w per texel (the surface seen from the +W side) within
+// [wMin - slack, wMax + slack]; with `normals`, the encoded face normal of that triangle per texel.
+void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, double minCos,
+                   bool normals, TileOutput& out);
 
 }  // namespace sa

@@ -46,6 +46,10 @@ ViewMetrics evaluateView(const Image& tc, const std::vector<float>& td, const st
         ++m.onlyTest;
       } else if (b) {
         ++m.onlyRef;
+        bool inside = x > 0 && y > 0 && x < W - 1 && y < H - 1;
+        for (int dy = -1; dy <= 1 && inside; ++dy)
+          for (int dx = -1; dx <= 1 && inside; ++dx) inside = std::isfinite(ref.depth[size_t(y + dy) * W + x + dx]);
+        m.interiorHoles += inside;
       }
       for (int k = 0; k < 3; ++k) {
         const double d = double(tc.rgba[4 * i + k]) - double(rs.rgba[4 * i + k]);

@@ -15,6 +15,9 @@ struct ViewMetrics {
   double normalMedianDeg = -1;  // -1 when the render has no normals (points mode)
   double psnr = 0;              // dB, RGB over the whole image
   size_t both = 0, onlyTest = 0, onlyRef = 0;
+  // Pixels where the reference has surface on the pixel and all 8 neighbours, and the render
+  // has none: holes inside the surface (pinholes, seams), not silhouette differences.
+  size_t interiorHoles = 0;
   std::vector<double> depthErrors;   // per pixel both cover, relative (for pooling)
   std::vector<double> normalErrors;  // degrees
 };

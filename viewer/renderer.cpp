@@ -111,7 +111,7 @@ struct Renderer::Gl {
   GLuint front = 0, inside = 0, splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLsizeiptr itemCapacity = 0;
-  GLuint heightTex = 0, pageColorTex = 0;
+  GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
   const PackReader* pack = nullptr;   // for streamed pages
   std::vector<uint8_t> resident;      // per page
   uint32_t nextPage = 0;
@@ -139,8 +139,8 @@ struct Renderer::Gl {
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
     glDeleteBuffers(3, bufs);
     releaseTargets();
-    GLuint tex[] = {heightTex, pageColorTex};
-    glDeleteTextures(2, tex);
+    GLuint tex[] = {heightTex, pageColorTex, normalTex};
+    glDeleteTextures(3, tex);
     GLuint q[] = {timeQuery, fragQuery};
     glDeleteQueries(2, q);
   }
@@ -162,6 +162,7 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   boundsMax_ = Eigen::Vector3d(m.boundsMax[0], m.boundsMax[1], m.boundsMax[2]);
   cellCount_ = m.cellCount;
   hasColor_ = pack.hasColor();
+  hasNormals_ = pack.hasNormals();
   spacing_ = m.sampleSpacing;
   culler_ = std::make_unique<CellCuller>(pack.cells());
   SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n", g.front));
@@ -209,29 +210,34 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   GLint maxLayers = 0, maxSize = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &maxLayers);
   glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
-  if (GLint(m.pageCount) > maxLayers || GLint(m.pageSize) > maxSize)
+  const GLsizei PW = GLsizei(m.pageWidth), PH = GLsizei(m.pageHeight), PC = GLsizei(m.pageCount);
+  if (PC > maxLayers || PW > maxSize || PH > maxSize)
     return Status::internal(pack.path() + ": atlas needs " + std::to_string(m.pageCount) + " layers of " +
-                            std::to_string(m.pageSize) + "^2 but the GL allows " + std::to_string(maxLayers) +
-                            " layers of " + std::to_string(maxSize) + "^2");
-  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.heightTex);
-  glTextureStorage3D(g.heightTex, 1, GL_R16UI, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
+                            std::to_string(m.pageWidth) + "x" + std::to_string(m.pageHeight) + " but the GL allows " +
+                            std::to_string(maxLayers) + " layers of " + std::to_string(maxSize) + "^2");
+  const uint64_t pageTexels = pack.pageTexels() * m.pageCount;
+  // An array texture per page channel; a channel the pack lacks gets one constant texel.
+  auto pages = [&](GLenum format, bool present, const uint8_t* fill, GLenum fillFormat, uint64_t bytesPerTexel) {
+    GLuint t = 0;
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &t);
+    if (present) {
+      glTextureStorage3D(t, 1, format, PW, PH, PC);
+      gpuBytes_ += pageTexels * bytesPerTexel;
+    } else {
+      glTextureStorage3D(t, 1, format, 1, 1, 1);
+      glTextureSubImage3D(t, 0, 0, 0, 0, 1, 1, 1, fillFormat, GL_UNSIGNED_BYTE, fill);
+    }
+    glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    return t;
+  };
+  const uint8_t white[4] = {255, 255, 255, 255}, up[2] = {128, 128};
+  g.heightTex = pages(GL_R16UI, true, nullptr, 0, 2);
+  g.pageColorTex = pages(GL_RGBA8, hasColor_, white, GL_RGBA, 4);
+  g.normalTex = pages(GL_RG8, hasNormals_, up, GL_RG, 2);
   g.pack = &pack;
   g.resident.assign(m.pageCount, 0);
   g.nextPage = 0;
-  glTextureParameteri(g.heightTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-  glTextureParameteri(g.heightTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-  gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 2;
-  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.pageColorTex);
-  if (hasColor_) {
-    glTextureStorage3D(g.pageColorTex, 1, GL_RGBA8, GLsizei(m.pageSize), GLsizei(m.pageSize), GLsizei(m.pageCount));
-    gpuBytes_ += uint64_t(m.pageSize) * m.pageSize * m.pageCount * 4;
-  } else {
-    const uint8_t white[4] = {255, 255, 255, 255};
-    glTextureStorage3D(g.pageColorTex, 1, GL_RGBA8, 1, 1, 1);
-    glTextureSubImage3D(g.pageColorTex, 0, 0, 0, 0, 1, 1, 1, GL_RGBA, GL_UNSIGNED_BYTE, white);
-  }
-  glTextureParameteri(g.pageColorTex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-  glTextureParameteri(g.pageColorTex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   if (!streamPages) {
     uploadPages(UINT64_MAX);
@@ -245,16 +251,20 @@ void Renderer::uploadPages(uint64_t budgetBytes) {
   Gl& g = *gl_;
   if (!g.pack) return;
   const PackMeta& m = g.pack->meta();
-  const uint64_t pageBytes = uint64_t(m.pageSize) * m.pageSize * (hasColor_ ? 6 : 2);
+  const GLsizei PW = GLsizei(m.pageWidth), PH = GLsizei(m.pageHeight);
+  const uint64_t pageBytes = g.pack->pageTexels() * (2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? 2 : 0));
   uint64_t spent = 0;
   // At least one page per call, then as many as the budget allows.
   while (g.nextPage < m.pageCount && (spent == 0 || spent + pageBytes <= budgetBytes)) {
     const uint32_t p = g.nextPage++;
-    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RED_INTEGER,
-                        GL_UNSIGNED_SHORT, g.pack->heightPage(p));
+    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, g.pack->heightPage(p));
     if (hasColor_)
-      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), GLsizei(m.pageSize), GLsizei(m.pageSize), 1, GL_RGBA,
-                          GL_UNSIGNED_BYTE, g.pack->colorPage(p));
+      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RGBA, GL_UNSIGNED_BYTE, g.pack->colorPage(p));
+    if (hasNormals_) {
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 2);
+      glTextureSubImage3D(g.normalTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RG, GL_UNSIGNED_BYTE, g.pack->normalPage(p));
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    }
     g.resident[p] = 1;
     spent += pageBytes;
   }
@@ -394,6 +404,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.cellBuf);
   glBindTextureUnit(0, g.heightTex);
   glBindTextureUnit(1, g.pageColorTex);
+  glBindTextureUnit(2, g.normalTex);
   const bool color = s.useColor && hasColor_;
   // Height ramp and clip geometry, camera-relative (differences formed in double).
   const Eigen::Vector3d upD = s.up.normalized();
@@ -418,9 +429,11 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     glUniform3fv(glGetUniformLocation(p, "camHi"), 1, hi);
     glUniform3fv(glGetUniformLocation(p, "camLo"), 1, lo);
     glUniform1i(glGetUniformLocation(p, "refineSteps"), std::max(0, s.refineSteps));
+    glUniform1i(glGetUniformLocation(p, "maxSteps"), std::max(1, s.iterations));
     glUniform1f(glGetUniformLocation(p, "nearPlane"), float(np));
     glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, fwd.data());
     glUniform1i(glGetUniformLocation(p, "useColor"), color ? 1 : 0);
+    glUniform1i(glGetUniformLocation(p, "storedNormals"), hasNormals_ ? 1 : 0);
     glUniform3fv(glGetUniformLocation(p, "baseColor"), 1, s.baseColor);
     glUniform1i(glGetUniformLocation(p, "shadingMode"), int(s.shading));
     glUniform1i(glGetUniformLocation(p, "headLight"), s.headLight ? 1 : 0);

@@ -101,7 +101,7 @@ class Renderer {
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
-  bool hasColor_ = false;
+  bool hasColor_ = false, hasNormals_ = false;
   uint64_t gpuBytes_ = 0, pointCount_ = 0;
   double spacing_ = 0;
 };

@@ -456,7 +456,8 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   s.hi = origin + Eigen::Vector3d(m.boundsMax);
   int fbw, fbh;
   glfwGetFramebufferSize(win, &fbw, &fbh);
-  s.cc = CameraController(orbitCameras(s.lo, s.hi, 1, Eigen::Vector3d::UnitY(), 40, std::max(fbw, 1), std::max(fbh, 1))[0]);
+  s.rs.up = s.pack.viewUp();
+  s.cc = CameraController(orbitCameras(s.lo, s.hi, 1, s.rs.up, 40, std::max(fbw, 1), std::max(fbh, 1))[0]);
   s.pivot = s.cc.camera().target;
   size_t scriptLine = 0;
   int waitFrames = 0;

@@ -24,29 +24,42 @@ TEST(Packing, TilesWithGuttersNeverOverlapAndStayInsidePages) {
   auto tiles = randomTiles(600, 3);
   uint64_t area = 0;
   for (auto& t : tiles) area += uint64_t(t.w + 2) * (t.h + 2);
-  const uint32_t page = choosePageSize(area, 200, 1024);
-  PackingResult r = packTiles(tiles, page);
+  PackingResult r = packAtlas(tiles, 1024);
+  const uint32_t pw = r.pageWidth, ph = r.pageHeight;
   ASSERT_EQ(r.placements.size(), tiles.size());
-  std::vector<std::vector<int>> owner(r.pageCount, std::vector<int>(size_t(page) * page, -1));
+  std::vector<std::vector<int>> owner(r.pageCount, std::vector<int>(size_t(pw) * ph, -1));
   for (size_t i = 0; i < tiles.size(); ++i) {
     const auto& p = r.placements[i];
     ASSERT_LT(p.page, r.pageCount);
     // The slot including its one-texel gutter.
     ASSERT_GE(p.x, 1u);
     ASSERT_GE(p.y, 1u);
-    ASSERT_LE(p.x + tiles[i].w + 1, page);
-    ASSERT_LE(p.y + tiles[i].h + 1, page);
+    ASSERT_LE(p.x + tiles[i].w + 1, pw);
+    ASSERT_LE(p.y + tiles[i].h + 1, ph);
     for (uint32_t y = p.y - 1; y < p.y + tiles[i].h + 1; ++y)
       for (uint32_t x = p.x - 1; x < p.x + tiles[i].w + 1; ++x) {
-        int& o = owner[p.page][size_t(y) * page + x];
+        int& o = owner[p.page][size_t(y) * pw + x];
         ASSERT_EQ(o, -1) << "tiles " << o << " and " << i << " overlap at " << x << "," << y;
         o = int(i);
       }
   }
   double used = 0;
   for (auto& t : tiles) used += double(t.w) * t.h;
-  std::printf("packing occupancy %.1f%% over %u page(s) of %u^2\n", 100 * used / (double(page) * page * r.pageCount),
-              r.pageCount, page);
+  const double occupancy = used / (double(pw) * ph * r.pageCount);
+  std::printf("packing occupancy %.1f%% over %u page(s) of %ux%u\n", 100 * occupancy, r.pageCount, pw, ph);
+  EXPECT_GT(occupancy, 0.6);
+}
+
+// A long thin tile (a sparse LAS strip) gets a long thin page, not a square mostly empty one.
+TEST(Packing, ElongatedTilesGetElongatedPages) {
+  const std::vector<TileSize> strip = {{2004, 20}};
+  const PackingResult r = packAtlas(strip, 4096);
+  EXPECT_EQ(r.pageCount, 1u);
+  EXPECT_EQ(r.pageWidth, 2048u);
+  EXPECT_EQ(r.pageHeight, 32u);
+  const std::vector<TileSize> column = {{20, 2004}, {20, 1000}};
+  const PackingResult c = packAtlas(column, 4096);
+  EXPECT_LE(uint64_t(c.pageWidth) * c.pageHeight * c.pageCount, uint64_t(64) * 2048);
 }
 
 struct SmallPack {
@@ -54,18 +67,20 @@ struct SmallPack {
   std::vector<CellRecord> cells;
   std::vector<std::vector<uint16_t>> heights;
   std::vector<std::vector<uint8_t>> rgba;
+  std::vector<std::vector<uint8_t>> normals;
 };
 
-SmallPack makePack(bool color) {
+SmallPack makePack(bool color, uint32_t pageWidth = 512, uint32_t pageHeight = 512) {
   SmallPack sp;
   auto tiles = randomTiles(40, 11);
-  PackingResult r = packTiles(tiles, 512);
+  PackingResult r = packTiles(tiles, pageWidth, pageHeight);
   sp.meta.origin[0] = 512345.678;
   sp.meta.origin[1] = 5012345.25;
   sp.meta.origin[2] = 101.5;
-  sp.meta.pageSize = 512;
+  sp.meta.pageWidth = pageWidth;
+  sp.meta.pageHeight = pageHeight;
   sp.meta.pageCount = r.pageCount;
-  sp.meta.flags = color ? uint32_t(kPackHasColor) : 0u;
+  sp.meta.flags = (color ? uint32_t(kPackHasColor) : 0u) | uint32_t(kPackHasNormals);
   sp.meta.texelSize = 0.01;
   std::mt19937 rng(5);
   for (size_t i = 0; i < tiles.size(); ++i) {
@@ -86,6 +101,9 @@ SmallPack makePack(bool color) {
     std::vector<uint8_t> col(h.size() * 4);
     for (auto& v : col) v = uint8_t(rng());
     sp.rgba.push_back(col);
+    std::vector<uint8_t> nrm(h.size() * 2);
+    for (auto& v : nrm) v = uint8_t(rng());
+    sp.normals.push_back(nrm);
   }
   return sp;
 }
@@ -93,11 +111,11 @@ SmallPack makePack(bool color) {
 TEST(PackFile, RoundTripsBitExactlyWithGutters) {
   test::TempDir d;
   for (bool color : {false, true}) {
-    SmallPack sp = makePack(color);
+    SmallPack sp = makePack(color, 512, 256);  // pages need not be square
     PackWriter w;
     ASSERT_TRUE(w.open(d.file("p.hfa"), sp.meta, sp.cells, "note").isOk());
     for (uint32_t i = 0; i < sp.cells.size(); ++i)
-      ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), color ? sp.rgba[i].data() : nullptr).isOk());
+      ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), sp.normals[i].data(), color ? sp.rgba[i].data() : nullptr).isOk());
     ASSERT_TRUE(w.finish().isOk());
     PackReader r;
     Status s = r.open(d.file("p.hfa"));
@@ -115,9 +133,10 @@ TEST(PackFile, RoundTripsBitExactlyWithGutters) {
           // Interior texels exact; gutter texels repeat the nearest edge texel.
           const int sj = std::clamp(j, 0, int(c.tileH) - 1), sk = std::clamp(k, 0, int(c.tileW) - 1);
           ASSERT_EQ(r.texel(c, k, j), sp.heights[i][size_t(sj) * c.tileW + sk]) << "cell " << i << " " << k << "," << j;
+          ASSERT_EQ(std::memcmp(r.normalTexel(c, k, j), &sp.normals[i][(size_t(sj) * c.tileW + sk) * 2], 2), 0);
           if (color) {
             const uint8_t* page = r.colorPage(c.page);
-            const size_t t = (size_t(c.tileY + j) * r.meta().pageSize + c.tileX + k) * 4;
+            const size_t t = (size_t(c.tileY + j) * r.meta().pageWidth + c.tileX + k) * 4;
             ASSERT_EQ(std::memcmp(page + t, &sp.rgba[i][(size_t(sj) * c.tileW + sk) * 4], 4), 0);
           }
         }
@@ -135,14 +154,16 @@ TEST(PackFile, HeaderBytesMatchTheSpec) {
   std::vector<unsigned char> b(64 + 32 * 4);
   f.read(reinterpret_cast<char*>(b.data()), std::streamsize(b.size()));
   EXPECT_EQ(std::string(reinterpret_cast<char*>(b.data()), 8), std::string("SCANHFA\0", 8));
-  EXPECT_EQ(b[8], 1);                                        // version 1, little-endian
+  EXPECT_EQ(b[8], 2);                                        // version 2, little-endian
   EXPECT_EQ(b[12], 0x04); EXPECT_EQ(b[15], 0x01);            // byte-order mark
-  EXPECT_EQ(b[16], 4);                                       // META CELL HGHT NOTE
+  EXPECT_EQ(b[16], 5);                                       // META CELL HGHT NRML NOTE
   EXPECT_EQ(b[20], 64);                                      // header size
   EXPECT_EQ(b[32], 64);                                      // section table offset
   EXPECT_EQ(std::string(reinterpret_cast<char*>(&b[64]), 4), "META");
   EXPECT_EQ(b[64 + 9], 0x10);                                // META at offset 4096
   EXPECT_EQ(std::string(reinterpret_cast<char*>(&b[96]), 4), "CELL");
+  EXPECT_EQ(std::string(reinterpret_cast<char*>(&b[128]), 4), "HGHT");
+  EXPECT_EQ(std::string(reinterpret_cast<char*>(&b[160]), 4), "NRML");
 }
 
 TEST(PackFile, ReaderRejectsCorruptTruncatedAndNewerFiles) {
@@ -150,7 +171,7 @@ TEST(PackFile, ReaderRejectsCorruptTruncatedAndNewerFiles) {
   SmallPack sp = makePack(false);
   PackWriter w;
   ASSERT_TRUE(w.open(d.file("p.hfa"), sp.meta, sp.cells, "").isOk());
-  for (uint32_t i = 0; i < sp.cells.size(); ++i) ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), nullptr).isOk());
+  for (uint32_t i = 0; i < sp.cells.size(); ++i) ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), sp.normals[i].data(), nullptr).isOk());
   ASSERT_TRUE(w.finish().isOk());
   std::ifstream in(d.file("p.hfa"), std::ios::binary);
   std::vector<char> good((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -164,8 +185,11 @@ TEST(PackFile, ReaderRejectsCorruptTruncatedAndNewerFiles) {
     EXPECT_NE(s.message().find("bad.hfa"), std::string::npos) << s.message();
   };
   auto v = good;
-  v[8] = 2;
-  expectError(v, "version 2 is newer");
+  v[8] = 3;
+  expectError(v, "version 3 is newer");
+  v = good;
+  v[8] = 1;
+  expectError(v, "made by an older scanatlas");
   v = good;
   v[0] = 'X';
   expectError(v, "bad magic");
@@ -175,9 +199,14 @@ TEST(PackFile, ReaderRejectsCorruptTruncatedAndNewerFiles) {
   v = good;
   v[4096 + 112] ^= 1;  // cell count inside META
   expectError(v, "META checksum");
+  uint64_t hght = 0;  // the HGHT section's offset, from its section-table entry (the third)
+  std::memcpy(&hght, &good[64 + 2 * 32 + 8], 8);
   v = good;
-  v[v.size() - 100] ^= 0x5a;  // a height texel in the last page
+  v[hght + 100] ^= 0x5a;  // a height texel in the first page
   expectError(v, "HGHT checksum");
+  v = good;
+  v[v.size() - 100] ^= 0x5a;  // a normal texel in the last page
+  expectError(v, "NRML checksum");
   expectError(std::vector<char>(10, 0), "too short");
   // A section table offset near 2^64: offset + table size wrapped and passed the bounds check
   // (fuzz_pack finding; zlib then read unmapped memory).
@@ -218,7 +247,7 @@ TEST(Verify, SoundPackPassesAndDamageIsReported) {
   {
     PackWriter w;
     ASSERT_TRUE(w.open(d.file("ok.hfa"), sp.meta, sp.cells, "").isOk());
-    for (uint32_t i = 0; i < sp.cells.size(); ++i) ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), nullptr).isOk());
+    for (uint32_t i = 0; i < sp.cells.size(); ++i) ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), sp.normals[i].data(), nullptr).isOk());
     ASSERT_TRUE(w.finish().isOk());
   }
   PackReader ok;

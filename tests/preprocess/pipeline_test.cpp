@@ -241,9 +241,11 @@ TEST(Pipeline, RepackingTheSameInputWithTheSameOptionsIsSkipped) {
 namespace sa {
 namespace {
 
-// Airborne lidar in US survey feet at (6.4e5, 8.5e5): packs as terrain seen from above, with
-// its colours, into a pack that verifies.
-TEST(PipelineReal, AutzenLasPacksAsTerrainWithColour) {
+// Airborne lidar in US survey feet at (6.4e5, 8.5e5): packs seen from above (up +z by the LAS
+// convention), with its colours, into a pack that verifies. Its estimated normals all face up,
+// so the normal test alone kept the whole tile one height field (a canopy interpolated down to
+// the ground); the layer test splits it: cells at clearly different heights over the same spot.
+TEST(PipelineReal, AutzenLasPacksAsTerrainWithColourAndLayers) {
   auto in = InputSet::open({test::sharedData("lidar/autzen_trim.las")});
   ASSERT_TRUE(in.isOk()) << in.status().message();
   test::TempDir d;
@@ -251,13 +253,36 @@ TEST(PipelineReal, AutzenLasPacksAsTerrainWithColour) {
   ASSERT_TRUE(packInput(*in, d.file("a.hfa"), PackOptions{}, nullptr, sum).isOk());
   EXPECT_EQ(sum.pointsRead, 110000u);
   EXPECT_TRUE(sum.hasColor);
-  EXPECT_EQ(sum.forcedCells, 0u);
   PackReader r;
   ASSERT_TRUE(r.open(d.file("a.hfa")).isOk());
   const VerifyReport v = verifyPack(r);
   EXPECT_TRUE(v.problems.empty()) << v.problems.front();
-  for (const CellRecord& c : r.cells()) EXPECT_GT(c.w[2], 0.9);  // height axes point up
+  EXPECT_EQ(r.meta().upSource, uint32_t(kUpConvention));
+  EXPECT_NEAR(r.up().z(), 1.0, 1e-12);
   EXPECT_NEAR(r.meta().origin[0] + r.meta().boundsMin[0], 636001.76, 1e-6);
+  EXPECT_GT(sum.cells, 100u);
+  // Over-under pairs: cells whose footprints overlap in x, y and whose z ranges are more than
+  // 10 ft apart (tree crowns over ground, the footbridge over the river).
+  struct Box { Eigen::Vector3d lo, hi; };
+  std::vector<Box> boxes;
+  for (const CellRecord& c : r.cells()) {
+    Box b{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
+    for (int k = 0; k < 8; ++k) {
+      const Eigen::Vector3d p = Eigen::Vector3d(c.origin) + Eigen::Vector3d(c.u) * c.box[k & 1] +
+                                Eigen::Vector3d(c.v) * c.box[2 + ((k >> 1) & 1)] + Eigen::Vector3d(c.w) * c.box[4 + (k >> 2)];
+      b.lo = b.lo.cwiseMin(p);
+      b.hi = b.hi.cwiseMax(p);
+    }
+    boxes.push_back(b);
+  }
+  size_t pairs = 0;
+  for (size_t i = 0; i < boxes.size() && pairs < 10; ++i)
+    for (size_t j = 0; j < boxes.size(); ++j) {
+      const Box &a = boxes[i], &b = boxes[j];
+      const bool overlapXY = a.lo.x() < b.hi.x() && b.lo.x() < a.hi.x() && a.lo.y() < b.hi.y() && b.lo.y() < a.hi.y();
+      if (overlapXY && a.lo.z() > b.hi.z() + 10) ++pairs;
+    }
+  EXPECT_GE(pairs, 10u) << "no cells over cells: layered structure was not split";
 }
 
 }  // namespace

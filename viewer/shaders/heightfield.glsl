@@ -16,6 +16,8 @@ layout(std430, binding = 0) readonly buffer Cells { Cell cells[]; };
 
 layout(binding = 0) uniform usampler2DArray heightPages;  // R16UI, 0 = not covered
 layout(binding = 1) uniform sampler2DArray colorPages;    // RGBA8
+layout(binding = 2) uniform sampler2DArray normalPages;   // RG8: hemi-octahedral normal in the cell frame
+uniform bool storedNormals;                               // the pack has normal pages (FORMAT.md)
 
 // Camera position relative to the pack origin, split into high and low float parts, so
 // that (O - camera) is formed without ever holding an absolute coordinate in float32.
@@ -42,8 +44,25 @@ vec2 texelCoord(Cell c, vec2 uv) {
   return (uv - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * size - 0.5;
 }
 
-// Bilinear height at (u, v). Where any of the four texels is uncovered, the nearest
-// texel decides (so coverage edges stay sharp and holes stay open).
+// Stored normal of texel (i, j), in the cell frame (FORMAT.md: hemi-octahedral, two bytes).
+vec3 texelNormal(Cell c, ivec2 ij) {
+  vec2 e = texelFetch(normalPages, ivec3(c.tile.yz + ij, c.tile.x), 0).rg * (255.0 / 127.5) - 1.0;
+  vec2 t = vec2(e.x + e.y, e.x - e.y) * 0.5;
+  return normalize(vec3(t, 1.0 - abs(t.x) - abs(t.y)));
+}
+
+// The height of texel ij where it is uncovered, next to covered texel n: n's tangent plane
+// (its height and stored normal) continued there. Without it a coverage edge is a flat step
+// half a texel wide, which a grazing ray enters from the side and misses.
+float extrapolatedHeight(Cell c, ivec2 n, float hn, ivec2 ij) {
+  vec3 nn = texelNormal(c, n);
+  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
+  return hn + dot(-nn.xy / max(nn.z, 0.05), vec2(ij - n) * texel);
+}
+
+// Bilinear height at (u, v). Where any of the four texels is uncovered, the nearest texel
+// decides coverage (so coverage edges stay sharp and holes stay open), and the uncovered ones
+// take its tangent plane (with stored normals; else its height).
 float sampleHeight(Cell c, vec2 uv) {
   vec2 size = c.boxW.zw;
   vec2 f = clamp(texelCoord(c, uv), vec2(-0.5), size - 0.5);
@@ -54,13 +73,142 @@ float sampleHeight(Cell c, vec2 uv) {
   float h01 = texelHeight(c, i0 + ivec2(0, 1));
   float h11 = texelHeight(c, i0 + ivec2(1, 1));
   if (min(min(h00, h10), min(h01, h11)) == kUncovered) {
-    ivec2 n = ivec2(floor(f + 0.5));
-    return texelHeight(c, clamp(n, ivec2(0), ivec2(size) - 1));
+    ivec2 n = clamp(ivec2(floor(f + 0.5)), ivec2(0), ivec2(size) - 1);
+    float hn = texelHeight(c, n);
+    if (hn == kUncovered || !storedNormals) return hn;
+    if (h00 == kUncovered) h00 = extrapolatedHeight(c, n, hn, i0);
+    if (h10 == kUncovered) h10 = extrapolatedHeight(c, n, hn, i0 + ivec2(1, 0));
+    if (h01 == kUncovered) h01 = extrapolatedHeight(c, n, hn, i0 + ivec2(0, 1));
+    if (h11 == kUncovered) h11 = extrapolatedHeight(c, n, hn, i0 + ivec2(1, 1));
   }
   return mix(mix(h00, h10, a.x), mix(h01, h11, a.x), a.y);
+}
+
+// Stored normal at (u, v), interpolated like the heights: bilinear where the four texels are
+// covered, else the nearest texel's. Normals come from the data (the mesh's triangles, or the
+// smoothed point normals), so they agree across cell borders where heights' gradients cannot.
+vec3 sampleNormal(Cell c, vec2 uv) {
+  vec2 size = c.boxW.zw;
+  vec2 f = clamp(texelCoord(c, uv), vec2(-0.5), size - 0.5);
+  ivec2 i0 = ivec2(floor(f));
+  vec2 a = f - vec2(i0);
+  bool all4 = texelHeight(c, i0) != kUncovered && texelHeight(c, i0 + ivec2(1, 0)) != kUncovered &&
+              texelHeight(c, i0 + ivec2(0, 1)) != kUncovered && texelHeight(c, i0 + ivec2(1, 1)) != kUncovered;
+  if (!all4) return texelNormal(c, clamp(ivec2(floor(f + 0.5)), ivec2(0), ivec2(size) - 1));
+  vec3 n = mix(mix(texelNormal(c, i0), texelNormal(c, i0 + ivec2(1, 0)), a.x),
+               mix(texelNormal(c, i0 + ivec2(0, 1)), texelNormal(c, i0 + ivec2(1, 1)), a.x), a.y);
+  return normalize(n);
+}
+
+// Normal from the height gradient (packs without normal pages): central differences over a
+// texel, one-sided where a neighbour is uncovered.
+vec3 gradientNormal(Cell c, vec2 uv) {
+  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
+  float h = sampleHeight(c, uv);
+  float hx0 = sampleHeight(c, uv - vec2(texel.x, 0.0)), hx1 = sampleHeight(c, uv + vec2(texel.x, 0.0));
+  float hy0 = sampleHeight(c, uv - vec2(0.0, texel.y)), hy1 = sampleHeight(c, uv + vec2(0.0, texel.y));
+  float ddu = 0.0, ddv = 0.0;
+  if (hx0 != kUncovered && hx1 != kUncovered) ddu = (hx1 - hx0) / (2.0 * texel.x);
+  else if (hx1 != kUncovered) ddu = (hx1 - h) / texel.x;
+  else if (hx0 != kUncovered) ddu = (h - hx0) / texel.x;
+  if (hy0 != kUncovered && hy1 != kUncovered) ddv = (hy1 - hy0) / (2.0 * texel.y);
+  else if (hy1 != kUncovered) ddv = (hy1 - h) / texel.y;
+  else if (hy0 != kUncovered) ddv = (h - hy0) / texel.y;
+  return normalize(vec3(-ddu, -ddv, 1.0));
 }
 
 vec3 sampleColor(Cell c, vec2 uv) {
   ivec2 n = clamp(ivec2(floor(texelCoord(c, uv) + 0.5)), ivec2(0), ivec2(c.boxW.zw) - 1);
   return texelFetch(colorPages, ivec3(c.tile.yz + n, c.tile.x), 0).rgb;
+}
+
+// The coverage edge between tOut (uncovered) and tIn (covered), by bisection to well under a
+// texel: returns a covered t next to the edge.
+float coverageEdge(Cell c, vec3 o, vec3 d, float tOut, float tIn) {
+  for (int i = 0; i < 10; ++i) {
+    float tm = 0.5 * (tOut + tIn);
+    vec3 p = o + d * tm;
+    if (sampleHeight(c, p.xy) != kUncovered) tIn = tm; else tOut = tm;
+  }
+  return tIn;
+}
+
+// Ray march through one height field (Lu, Low & Zheng §3.3): `steps` linear steps over
+// [tEnter, tExit], then `refine` bisection steps and a secant step. The surface is one-sided
+// and exists only where covered: a hit is a crossing from above to below inside the covered
+// region. Entering the covered region already below the surface means the ray came through
+// the side of the sheet (a scan edge, a hole's rim, an open mesh border) - not a surface, so
+// no hit; leaving it, the crossing may lie just before the edge, so the edge is checked.
+// The stepping loop only finds the next such event; events are resolved outside it, so the
+// bisections do not run inside the loop (SIMD lanes would all pay for them at every step).
+bool marchHeightField(Cell c, vec3 o, vec3 d, float tEnter, float tExit, int steps, int refine, out float tHit) {
+  float dt = (tExit - tEnter) / float(steps);
+  vec3 p = o + d * tEnter;
+  float h = sampleHeight(c, p.xy);
+  float tPrev = tEnter, gPrev = p.z - h;
+  bool covPrev = h != kUncovered;
+  float tLo = 0.0, tHi = 0.0, gLo = 0.0, gHi = 0.0;
+  bool found = false;
+  int i = 1;
+  for (int events = 0; events < 4 && !found; ++events) {
+    float t = tPrev, g = gPrev;
+    bool cov = covPrev, event = false;
+    for (; i <= steps; ++i) {
+      t = tEnter + dt * float(i);
+      p = o + d * t;
+      h = sampleHeight(c, p.xy);
+      cov = h != kUncovered;
+      g = p.z - h;
+      if ((cov && g <= 0.0 && (!covPrev || gPrev > 0.0)) || (!cov && covPrev && gPrev > 0.0)) {
+        event = true;
+        break;
+      }
+      tPrev = t;
+      gPrev = g;
+      covPrev = cov;
+    }
+    if (!event) return false;
+    ++i;
+    if (cov && covPrev) {  // a crossing from above
+      tLo = tPrev; gLo = gPrev; tHi = t; gHi = g;
+      found = true;
+    } else if (cov) {  // into the covered region, below the surface: above at the edge?
+      float te = coverageEdge(c, o, d, tPrev, t);
+      vec3 pe = o + d * te;
+      float ge = pe.z - sampleHeight(c, pe.xy);
+      if (ge > 0.0) {
+        tLo = te; gLo = ge; tHi = t; gHi = g;
+        found = true;
+      }
+    } else {  // out of the covered region from above: below before the edge?
+      float te = coverageEdge(c, o, d, t, tPrev);
+      vec3 pe = o + d * te;
+      float ge = pe.z - sampleHeight(c, pe.xy);
+      if (ge <= 0.0) {
+        tLo = tPrev; gLo = gPrev; tHi = te; gHi = ge;
+        found = true;
+      }
+    }
+    tPrev = t;
+    gPrev = g;
+    covPrev = cov;
+  }
+  if (!found) return false;
+  // Refinement: bisection keeps the bracket (an uncovered midpoint counts as above: a hole
+  // inside the bracket), a last secant step lands on the surface.
+  for (int k = 0; k < refine; ++k) {
+    float tm = 0.5 * (tLo + tHi);
+    vec3 pm = o + d * tm;
+    float hm = sampleHeight(c, pm.xy);
+    float gm = pm.z - hm;
+    if (hm == kUncovered || gm > 0.0) {
+      tLo = tm;
+      if (hm != kUncovered) gLo = gm;
+    } else {
+      tHi = tm;
+      gHi = gm;
+    }
+  }
+  tHit = (gLo > 0.0 && gHi <= 0.0) ? mix(tLo, tHi, gLo / (gLo - gHi)) : tHi;
+  return true;
 }

@@ -2,9 +2,9 @@
 // Per-pixel ray casting of one cell's height field: Lu, Low & Zheng §3.3. The ray is
 // expressed in the cell's frame (M1, §3.2.2), clipped to the box analytically (so a camera
 // inside the box still sees it when its back faces are rasterized), marched with the box's
-// linear steps, refined by bisection + a final secant step, and kept only if the hit is on a
-// covered texel inside the box (the boundary test, §3.3.1); otherwise discarded so boxes
-// behind show through. gl_FragDepth comes from the true hit point.
+// linear steps, refined by bisection + a final secant step (marchHeightField, heightfield.glsl),
+// and kept only if the hit is on a covered texel inside the box (the boundary test, §3.3.1);
+// otherwise discarded so boxes behind show through. gl_FragDepth comes from the true hit point.
 //
 // FRONT_FACES (defined by the renderer for boxes the camera is outside of): the fragment is
 // on the box's front face and the hit lies behind it, so with reverse-Z the written depth is
@@ -23,6 +23,7 @@ flat in int vSteps;
 flat in vec3 vCamFrame;
 
 uniform int refineSteps;
+uniform int maxSteps;       // the --iterations bound
 uniform float nearPlane;
 uniform vec3 viewForward;   // world forward axis of the camera
 uniform bool useColor;
@@ -46,36 +47,14 @@ void main() {
   float tExit = min(min(tf.x, tf.y), tf.z);
   if (tEnter >= tExit) discard;
 
-  // Linear search: the first sample below the surface after one above it. A ray that
-  // starts below the surface sees the sheet from behind: the surface is one-sided.
-  int iterations = max(vSteps, 1);
-  float dt = (tExit - tEnter) / float(iterations);
-  float tPrev = tEnter;
-  vec3 p = o + d * tEnter;
-  float gPrev = p.z - sampleHeight(c, p.xy);  // > 0: above the surface
-  float tHit = -1.0;
-  float tLo = 0.0, tHi = 0.0, gLo = 0.0, gHi = 0.0;
-  for (int i = 1; i <= iterations; ++i) {
-    float t = tEnter + dt * float(i);
-    p = o + d * t;
-    float g = p.z - sampleHeight(c, p.xy);
-    if (gPrev > 0.0 && g <= 0.0 && g > -1e29) {
-      tLo = tPrev; gLo = gPrev; tHi = t; gHi = g;
-      tHit = t;
-      break;
-    }
-    tPrev = t;
-    gPrev = g;
-  }
-  if (tHit < 0.0) discard;
-  // Refinement: bisection keeps the bracket, a last secant step lands on the surface.
-  for (int i = 0; i < refineSteps; ++i) {
-    float tm = 0.5 * (tLo + tHi);
-    vec3 pm = o + d * tm;
-    float gm = pm.z - sampleHeight(c, pm.xy);
-    if (gm > 0.0 || gm < -1e29) { tLo = tm; gLo = gm > 0.0 ? gm : gLo; } else { tHi = tm; gHi = gm; }
-  }
-  float tS = (gLo > 0.0 && gHi <= 0.0) ? mix(tLo, tHi, gLo / (gLo - gHi)) : tHi;
+  // Steps: about one per 1.5 texels this ray crosses (finer steps than the surface's own
+  // resolution find nothing new, coarser ones step over bumps at grazing angles), at least the
+  // box's estimate from its size on screen, at most the --iterations bound.
+  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
+  float crossed = length(d.xy) * (tExit - tEnter) / min(texel.x, texel.y);
+  int steps = clamp(int(ceil(crossed / 1.5)), max(vSteps, 1), max(maxSteps, 1));
+  float tS;
+  if (!marchHeightField(c, o, d, tEnter, tExit, steps, refineSteps, tS)) discard;
   vec3 hit = o + d * tS;
   // Boundary test (§3.3.1): inside the box and on a covered texel.
   if (any(lessThan(hit, bmin - 1e-6 * (bmax - bmin))) || any(greaterThan(hit, bmax + 1e-6 * (bmax - bmin))))
@@ -83,13 +62,7 @@ void main() {
   float hh = sampleHeight(c, hit.xy);
   if (hh == kUncovered) discard;
 
-  // Normal from the height gradient (central differences, one texel).
-  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
-  float hx0 = sampleHeight(c, hit.xy - vec2(texel.x, 0.0)), hx1 = sampleHeight(c, hit.xy + vec2(texel.x, 0.0));
-  float hy0 = sampleHeight(c, hit.xy - vec2(0.0, texel.y)), hy1 = sampleHeight(c, hit.xy + vec2(0.0, texel.y));
-  float ddu = (hx0 == kUncovered || hx1 == kUncovered) ? 0.0 : (hx1 - hx0) / (2.0 * texel.x);
-  float ddv = (hy0 == kUncovered || hy1 == kUncovered) ? 0.0 : (hy1 - hy0) / (2.0 * texel.y);
-  vec3 nFrame = normalize(vec3(-ddu, -ddv, 1.0));
+  vec3 nFrame = storedNormals ? sampleNormal(c, hit.xy) : gradientNormal(c, hit.xy);
   vec3 nWorld = c.axisU.xyz * nFrame.x + c.axisV.xyz * nFrame.y + c.axisW.xyz * nFrame.z;
 
   // Camera-relative world position of the hit, then its depth.
