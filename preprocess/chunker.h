@@ -22,7 +22,7 @@ struct ChunkPoint {
   uint8_t rgb[3];
   uint8_t flags;
   uint16_t scan;
-  uint16_t pad;
+  uint16_t spacing;  // pass A: the point's local spacing over its chunk's, x 1024 (0: unknown)
   uint32_t vid;  // index of the point in its file (mesh vertex index for the triangle path)
 };
 static_assert(sizeof(ChunkPoint) == 36);

@@ -144,7 +144,7 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
 }  // namespace
 
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
-                  std::vector<uint8_t>& keep) {
+                  std::vector<uint8_t>& keep, float* localSpacing) {
   keep.assign(n, 1);
   if (n == 0) return 0;
   const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
@@ -163,6 +163,10 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
       const size_t i = r.begin() + a;
       const int* in = &ind[a * size_t(k)];
       const Eigen::Vector3d p(&src[3 * i]);
+      if (localSpacing) {
+        const int j = std::min(k - 1, kDensityNeighbours);  // [0] is the point itself
+        localSpacing[i] = float(std::sqrt(dist[a * size_t(k) + size_t(j)] * M_PI / std::max(j, 1)));
+      }
       if (!density.empty()) {
         // Outlier: much farther from its neighbours than they are from theirs (a local test,
         // so sparse but real regions - water returns, a scan's fringe - stay).
@@ -212,10 +216,14 @@ void estimateNormals(const double* pos, size_t n, int k, const NormalOrientation
 
 namespace {
 
+constexpr int kAreaNeighbours = 8;
+
 // Nearest-neighbour distances of up to `queries` points of `tp[0..m)` whose index passes
-// `accept`, appended to `out`.
+// `accept`, appended to `out`, and their area spacings (r_8 sqrt(pi / 8), r_8 the distance to
+// the 8th neighbour: the side of the area per point) to `area`.
 template <class Accept>
-void nearestDistances(const double* tp, size_t m, size_t queries, Accept accept, std::vector<double>& out) {
+void nearestDistances(const double* tp, size_t m, size_t queries, Accept accept, std::vector<double>& out,
+                      std::vector<double>& area) {
   if (m < 2) return;
   flann::Matrix<double> data(const_cast<double*>(tp), m, 3);
   KdTree tree(data, flann::KDTreeSingleIndexParams(15));
@@ -225,24 +233,28 @@ void nearestDistances(const double* tp, size_t m, size_t queries, Accept accept,
     if (accept(a)) qs.insert(qs.end(), tp + 3 * a, tp + 3 * a + 3);
   const size_t q = qs.size() / 3;
   if (q == 0) return;
-  std::vector<int> ind(q * 2);
-  std::vector<double> dist(q * 2);
-  flann::Matrix<int> mi(ind.data(), q, 2);
-  flann::Matrix<double> md(dist.data(), q, 2);
+  const size_t k = std::min<size_t>(kAreaNeighbours + 1, m);
+  std::vector<int> ind(q * k);
+  std::vector<double> dist(q * k);
+  flann::Matrix<int> mi(ind.data(), q, k);
+  flann::Matrix<double> md(dist.data(), q, k);
   flann::Matrix<double> mq(qs.data(), q, 3);
-  tree.knnSearch(mq, mi, md, 2, flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
-  for (size_t a = 0; a < q; ++a)
-    if (dist[2 * a + 1] > 0) out.push_back(std::sqrt(dist[2 * a + 1]));  // [0] is the point itself
+  tree.knnSearch(mq, mi, md, int(k), flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
+  for (size_t a = 0; a < q; ++a) {
+    if (dist[k * a + 1] > 0) out.push_back(std::sqrt(dist[k * a + 1]));  // [0] is the point itself
+    if (k == kAreaNeighbours + 1 && dist[k * a + k - 1] > 0)
+      area.push_back(std::sqrt(dist[k * a + k - 1] * M_PI / kAreaNeighbours));
+  }
 }
 
 }  // namespace
 
-double estimateSpacing(const double* pos, size_t n, size_t samples) {
-  if (n < 2) return 0;
-  std::vector<double> d;
+Spacing estimateSpacing(const double* pos, size_t n, size_t samples) {
+  if (n < 2) return {};
+  std::vector<double> d, area;
   constexpr size_t kMaxTree = 1 << 17;
   if (n <= kMaxTree) {
-    nearestDistances(pos, n, samples, [](size_t) { return true; }, d);
+    nearestDistances(pos, n, samples, [](size_t) { return true; }, d, area);
   } else {
     // A kd-tree over millions of points costs more than the rest of the chunk's octree.
     // Spacing is local: take a few sub-cubes holding about kMaxTree / 4 points each (at full
@@ -272,12 +284,18 @@ double estimateSpacing(const double* pos, size_t n, size_t samples) {
       const double inner = side / 4;
       nearestDistances(sub.data(), sub.size() / 3, samples / 4, [&](size_t a) {
         return ((Eigen::Vector3d(&sub[3 * a]) - c).cwiseAbs().array() <= inner).all();
-      }, d);
+      }, d, area);
     }
   }
-  if (d.empty()) return 0;
-  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-  return d[d.size() / 2];
+  auto median = [](std::vector<double>& v) {
+    if (v.empty()) return 0.0;
+    std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  Spacing s;
+  s.nearest = median(d);
+  s.area = median(area);
+  return s;
 }
 
 }  // namespace sa

@@ -36,14 +36,24 @@ struct SurfaceOptions {
 // averaged out). pos: n xyz-interleaved positions (updated); nrm: n normals (in/out). Points
 // whose neighbourhood is degenerate keep their position and get a zero normal when estimated.
 // Returns the number of outliers.
+// localSpacing (may be null): per point, the side of its area, r_8 sqrt(pi / 8) (Spacing::area).
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
-                  std::vector<uint8_t>& keep);
+                  std::vector<uint8_t>& keep, float* localSpacing = nullptr);
 
 // pos: n xyz-interleaved positions. Writes n unit normals (xyz-interleaved) into nrm.
 // Points with fewer than 3 distinct neighbours get a zero normal (unknown).
 void estimateNormals(const double* pos, size_t n, int k, const NormalOrientation& orient, float* nrm);
 
-// Median distance to the nearest other point over up to `samples` evenly spread points.
-double estimateSpacing(const double* pos, size_t n, size_t samples = 4096);
+struct Spacing {
+  double nearest = 0;  // median distance to the nearest other point: the sample spacing
+  // Median side of the area per point, r_8 sqrt(pi / 8) with r_8 the distance to the 8th
+  // nearest neighbour: like `nearest` on an even grid, larger where samples come in lines
+  // (airborne lidar's scan lines, a turntable scanner's profiles), where the nearest neighbour
+  // sees only the spacing along a line.
+  double area = 0;
+};
+
+// Over up to `samples` evenly spread points.
+Spacing estimateSpacing(const double* pos, size_t n, size_t samples = 4096);
 
 }  // namespace sa

@@ -14,6 +14,7 @@
 #include "atlas/pack_file.h"
 #include "atlas/packing.h"
 #include "common/fileio.h"
+#include "preprocess/cell_margin.h"
 #include "preprocess/normals.h"
 #include "preprocess/pullpush.h"
 #include "preprocess/triangle_cells.h"
@@ -54,7 +55,8 @@ struct PackJob {
   std::vector<uint32_t> vertexCell;                         // triangle path: the cell of each vertex
   std::vector<std::pair<uint32_t, uint32_t>> sampleCells;   // triangle path: (triangle, cell) of its surface samples
   std::vector<std::pair<uint32_t, uint32_t>> triCells;      // triangle path: (triangle, cell) to rasterize, sorted
-  double spacingSum = 0;
+  std::vector<double> chunkSpacing;  // per chunk: its sample spacing (ChunkPoint::spacing is relative to it)
+  double spacingSum = 0, areaSpacingSum = 0;
   uint64_t spacingWeight = 0;
   double texel = 0;
   std::vector<CellRecord> records;
@@ -159,7 +161,8 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
 
 // Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h).
 // Drops the outliers from pts, pos and nrm.
-void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm) {
+void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
+                     double chunkSpacing) {
   NormalOrientation orient;
   orient.towardScanner = job.input.towardScanner();
   orient.center = job.bounds.centroid - job.origin;
@@ -171,8 +174,11 @@ void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<dou
   so.smooth = job.opt.smooth;
   so.outlierRatio = job.opt.outlierRatio;
   std::vector<uint8_t> keep;
-  const size_t removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep);
+  std::vector<float> local(pts.size(), 0.f);
+  const size_t removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data());
   job.sum.outliersRemoved += removed;
+  for (size_t i = 0; i < pts.size(); ++i)
+    pts[i].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
   if (removed == 0) return;
   size_t m = 0;
   for (size_t i = 0; i < pts.size(); ++i) {
@@ -188,7 +194,7 @@ void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<dou
 }
 
 // Sample spacing of a chunk's input points (points sampled on large triangles left out).
-double chunkSpacing(const std::vector<ChunkPoint>& pts, const std::vector<double>& pos) {
+Spacing chunkSpacing(const std::vector<ChunkPoint>& pts, const std::vector<double>& pos) {
   std::vector<double> real;
   for (size_t i = 0; i < pts.size(); ++i)
     if (!(pts[i].flags & kChunkSurfaceSample)) real.insert(real.end(), &pos[3 * i], &pos[3 * i] + 3);
@@ -246,12 +252,15 @@ Status chunkCells(PackJob& job, uint32_t ci) {
   SA_RETURN_IF_ERROR(loadChunk(ch, pts));
   decodePositions(pts, job.qz, pos);
   givenNormals(job, pts, nrm);
-  const double sp = chunkSpacing(pts, pos);
+  const Spacing spacing = chunkSpacing(pts, pos);
+  const double sp = spacing.nearest;
   if (sp > 0) {
     job.spacingSum += sp * double(pts.size());
+    job.areaSpacingSum += std::max(spacing.area, sp) * double(pts.size());
     job.spacingWeight += pts.size();
   }
-  if (!job.triangles) fitChunkSurface(job, pts, pos, nrm);
+  if (!job.triangles) fitChunkSurface(job, pts, pos, nrm, sp);
+  job.chunkSpacing[ci] = sp;
   const size_t n = pts.size();
   std::vector<uint32_t> idx(n);
   for (uint32_t i = 0; i < n; ++i) idx[i] = i;
@@ -285,6 +294,7 @@ Status chunkCells(PackJob& job, uint32_t ci) {
 Status cellsPhase(PackJob& job) {
   const auto t0 = Clock::now();
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
+  job.chunkSpacing.assign(job.dist.chunks.size(), 0.0);
   uint64_t processed = 0;
   for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
     processed += job.dist.chunks[ci].count;
@@ -296,6 +306,7 @@ Status cellsPhase(PackJob& job) {
   job.sum.seconds[2] = secondsSince(t0);
   job.sum.spacing = job.spacingWeight ? job.spacingSum / double(job.spacingWeight) : job.qz.cubeSize * 1e-3;
   if (!(job.sum.spacing > 0)) job.sum.spacing = job.qz.cubeSize * 1e-3;
+  job.sum.areaSpacing = job.spacingWeight ? job.areaSpacingSum / double(job.spacingWeight) : job.sum.spacing;
   if (job.cells.empty()) return Status::badInput(job.input.files()[0].path + ": no cells produced");
   if (job.cells.size() > 16u << 20) return Status::badInput("more than 16 Mi cells; lower --max-depth");
   return Status::ok();
@@ -305,7 +316,12 @@ Status cellsPhase(PackJob& job) {
 void layoutPhase(PackJob& job) {
   PackSummary& sum = job.sum;
   const PackOptions& opt = job.opt;
-  double t = opt.texelSize > 0 ? opt.texelSize : sum.spacing * opt.texelPerSpacing;
+  // Point inputs: texels from the area each point stands for (which the nearest-neighbour
+  // spacing underestimates where samples come in lines), and at most kMaxTexelsPerPoint texels
+  // per point, so sparse or elongated scans stay small. Meshes: from the vertex spacing.
+  double t = opt.texelSize > 0 ? opt.texelSize : (job.triangles ? sum.spacing : sum.areaSpacing) * opt.texelPerSpacing;
+  const uint64_t budget = job.triangles ? opt.texelBudget
+                                        : std::min<uint64_t>(opt.texelBudget, std::max<uint64_t>(4096, kMaxTexelsPerPoint * job.bounds.count));
   // Point tiles reach the coverage radius past their points. Triangle tiles hold their
   // triangles whole (assignPhase grew the extents) plus a texel, and reach the lattice step of
   // the points sampled on large triangles past those points.
@@ -313,7 +329,7 @@ void layoutPhase(PackJob& job) {
   double area = 0;
   for (const WorkCell& c : job.cells)
     area += (c.ext[1] - c.ext[0] + 2 * padUV + t) * (c.ext[3] - c.ext[2] + 2 * padUV + t);
-  if (opt.texelSize <= 0) t = std::max(t, std::sqrt(area / double(opt.texelBudget)));
+  if (opt.texelSize <= 0) t = std::max(t, std::sqrt(area / double(budget)));
   const uint32_t maxTile = opt.maxPageSize - 2;
   // Triangle tiles: a texel past their (grown) extents; cells holding points sampled on large
   // triangles reach the lattice step past them.
@@ -332,8 +348,8 @@ void layoutPhase(PackJob& job) {
       texels += uint64_t(sizes[i].w) * sizes[i].h;
     }
     sum.texels = texels;
-    if (texels <= opt.texelBudget || opt.texelSize > 0) break;
-    t *= std::sqrt(double(texels) / double(opt.texelBudget)) * 1.01;
+    if (texels <= budget || opt.texelSize > 0) break;
+    t *= std::sqrt(double(texels) / double(budget)) * 1.01;
   }
   sum.texelSize = job.texel = t;
   const PackingResult layout = packAtlas(sizes, opt.maxPageSize);
@@ -489,36 +505,60 @@ void triangleTile(const PackJob& job, const std::vector<uint32_t>* tris, CellRec
   rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * job.texel, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), true, tile);
 }
 
-// One cell's tile from its points (in the rewritten chunk: smoothed, with normals).
-void pointTile(const PackJob& job, const WorkCell& c, const CellRecord& r, const std::vector<ChunkPoint>& pts,
-               const std::vector<double>& pos, bool withColor, const TileGrid& g, TileOutput& tile) {
+// One cell's tile from its points (in the rewritten chunk: smoothed, with normals) and the
+// neighbouring cells' points in its margin (preprocess/cell_margin.h).
+void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::vector<ChunkPoint>& pts,
+               const std::vector<double>& pos, const MarginFinder& margins, bool withColor, PackWriter& writer,
+               uint32_t id, TileGrid& g, TileOutput& tile) {
   const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
-  std::vector<double> u(c.count), v(c.count), w(c.count);
-  std::vector<float> nf(3 * size_t(c.count));
-  std::vector<uint8_t> rgb(withColor ? 3 * size_t(c.count) : 0);
-  for (uint32_t k = 0; k < c.count; ++k) {
-    const size_t pi = size_t(c.first) + k;
+  const double cover = job.opt.coverageRadius * job.sum.spacing;
+  std::vector<uint32_t> idx(c.count);
+  for (uint32_t k = 0; k < c.count; ++k) idx[k] = c.first + k;
+  MarginFinder::Cell mc{O, U, V, Wn, {}, c.first, c.count};
+  std::copy(c.ext, c.ext + 6, mc.ext);
+  margins.find(mc, cover, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), idx);
+  const size_t n = idx.size();
+  std::vector<double> u(n), v(n), w(n);
+  std::vector<float> nf(3 * n);
+  std::vector<uint8_t> rgb(withColor ? 3 * n : 0);
+  std::vector<float> scale(n);
+  const double toPack = job.chunkSpacing[c.chunk] / 1024 / job.sum.spacing;
+  double wLo = r.box[4], wHi = r.box[5];
+  for (size_t k = 0; k < n; ++k) {
+    const size_t pi = idx[k];
     const Eigen::Vector3d d = vec(&pos[3 * pi]) - O;
     u[k] = d.dot(U);
     v[k] = d.dot(V);
     w[k] = d.dot(Wn);
-    const Eigen::Vector3d n(pts[pi].n[0], pts[pi].n[1], pts[pi].n[2]);
-    nf[3 * k] = float(n.dot(U));
-    nf[3 * k + 1] = float(n.dot(V));
-    nf[3 * k + 2] = float(n.dot(Wn));
-    if (withColor) std::copy(pts[pi].rgb, pts[pi].rgb + 3, &rgb[3 * size_t(k)]);
+    wLo = std::min(wLo, w[k]);
+    wHi = std::max(wHi, w[k]);
+    const Eigen::Vector3d nn(pts[pi].n[0], pts[pi].n[1], pts[pi].n[2]);
+    nf[3 * k] = float(nn.dot(U));
+    nf[3 * k + 1] = float(nn.dot(V));
+    nf[3 * k + 2] = float(nn.dot(Wn));
+    if (withColor) std::copy(pts[pi].rgb, pts[pi].rgb + 3, &rgb[3 * k]);
+    scale[k] = float(pts[pi].spacing * toPack);
   }
+  g.wMin = wLo;
+  g.wMax = wHi;
   TileSamples s;
   s.u = u.data();
   s.v = v.data();
   s.w = w.data();
   s.normal = nf.data();
   s.rgb = withColor ? rgb.data() : nullptr;
-  s.n = c.count;
+  s.scale = scale.data();
+  s.n = n;
   SplatOptions so;
   so.splatRadius = job.opt.splatRadius * job.sum.spacing;
-  so.coverageRadius = job.opt.coverageRadius * job.sum.spacing;
+  so.coverageRadius = cover;
+  // The margin's samples and the surface between them may lie a little above or below the
+  // cell's own points: the height range grows to hold them.
+  so.fitHeightRange = true;
   pullPushTile(g, s, so, tile);
+  r.box[4] = tile.wMin;
+  r.box[5] = tile.wMax;
+  writer.setCellHeights(id, tile.wMin, tile.wMax);
 }
 
 // ---- pass B, one chunk: every cell's tile ----
@@ -530,6 +570,9 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
   std::unordered_map<uint32_t, std::vector<uint32_t>> cellTris;
   if (job.triangles) SA_RETURN_IF_ERROR(chunkTriangles(job, ci, cellTris));
   const bool withColor = (job.meta.flags & kPackHasColor) != 0;
+  std::vector<float> nrm(job.triangles ? 0 : 3 * pts.size());
+  for (size_t i = 0; i < nrm.size() / 3; ++i) std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
+  const MarginFinder margins(pos.data(), nrm.data(), job.triangles ? 0 : pts.size());
   Status failed;
   std::mutex failMu;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
@@ -550,7 +593,7 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
         auto it = cellTris.find(id);
         triangleTile(job, it == cellTris.end() ? nullptr : &it->second, r, writer, id, g, tile);
       } else {
-        pointTile(job, job.cells[id], r, pts, pos, withColor, g, tile);
+        pointTile(job, job.cells[id], r, pts, pos, margins, withColor, writer, id, g, tile);
       }
       Status s = writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
                                   withColor ? tile.rgba.data() : nullptr);

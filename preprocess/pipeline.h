@@ -19,7 +19,7 @@ struct PackOptions {
   double texelSize = 0;           // world units; 0 = from sample spacing and budget
   double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
   double coverageRadius = 1.5;    // in sample spacings: texels whose surface point is farther stay empty
-  double splatRadius = 1.0;       // in sample spacings: the point splat kernel
+  double splatRadius = 1.5;       // in sample spacings: the point splat kernel (tangent planes)
   double outlierRatio = 3;        // local outlier test of point inputs (0: keep every point)
   bool smooth = true;             // point inputs: moving-least-squares smoothing
   bool asPoints = false;          // ignore faces: pull-push from the vertices
@@ -38,7 +38,7 @@ struct PackSummary {
   uint32_t cells = 0, forcedCells = 0, degenerateCells = 0, layeredCells = 0, pages = 0, chunks = 0;
   uint32_t pageWidth = 0, pageHeight = 0;
   uint64_t texels = 0, fileBytes = 0;
-  double spacing = 0, texelSize = 0;
+  double spacing = 0, areaSpacing = 0, texelSize = 0;
   double seconds[6] = {0, 0, 0, 0, 0, 0};
   std::vector<uint32_t> cellsPerLevel;
   bool normalsEstimated = false, fromTriangles = false, hasColor = false;
@@ -49,6 +49,9 @@ struct PackSummary {
   double hashSeconds = 0;
   std::vector<std::string> warnings;
 };
+
+// Point inputs get at most this many texels per point (a bound on bytes per point).
+inline constexpr uint64_t kMaxTexelsPerPoint = 8;
 
 // Bytes of working memory per point while a chunk is processed (records, positions,
 // normals, kd-tree, tile samples); sets the chunk size from the memory budget.

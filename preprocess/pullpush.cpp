@@ -10,6 +10,11 @@
 namespace sa {
 namespace {
 
+// A sample's radii grow with its local spacing up to this factor: enough that a region seen by
+// one scan of several (twice the merged spacing) is not peppered with holes, while sparse
+// returns (vegetation, water) do not grow blobs of surface where no point is.
+constexpr float kMaxScale = 1.5f;
+
 struct Level {
   int w = 0, h = 0;
   std::vector<float> weight;   // clamped to [0, 1] after normalizing
@@ -62,18 +67,19 @@ Quadric fitQuadric(const TileGrid& g, const double* u, const double* v, const do
 }
 
 // Coverage in 3-D: a texel is covered when its reconstructed surface point (texel centre,
-// surface height) lies within `radius` of a sample. A 2-D test (distance in the plane) would
+// surface height) lies within a sample's radius of it. A 2-D test (distance in the plane) would
 // cover the interpolation across a height jump (roof to ground, deck to water, canopy to
 // ground), which is surface where no point is; in 3-D such jumps stay open, as holes do.
 // Stamped per sample over the texels of its disk, row by row.
-std::vector<uint8_t> coverage3d(const TileGrid& g, const double* u, const double* v, const double* w, size_t n,
-                                const std::vector<double>& surface, double radius) {
+std::vector<uint8_t> coverage3d(const TileGrid& g, const TileSamples& s, const std::vector<double>& surface,
+                                double radius) {
   const int W = g.width, H = g.height;
   std::vector<uint8_t> covered(size_t(W) * H, 0);
-  const double ru = radius / g.du, rv = radius / g.dv, r2 = radius * radius;
-  const int riv = static_cast<int>(std::ceil(rv));
-  for (size_t s = 0; s < n; ++s) {
-    const double fx = (u[s] - g.u0) / g.du - 0.5, fy = (v[s] - g.v0) / g.dv - 0.5;
+  for (size_t i = 0; i < s.n; ++i) {
+    const double r = radius * (s.scale ? std::clamp(s.scale[i], 1.0f, kMaxScale) : 1.0f);
+    const double ru = r / g.du, rv = r / g.dv, r2 = r * r;
+    const int riv = static_cast<int>(std::ceil(rv));
+    const double fx = (s.u[i] - g.u0) / g.du - 0.5, fy = (s.v[i] - g.v0) / g.dv - 0.5;
     if (!(fx > -ru - 1 && fy > -rv - 1 && fx < W + ru && fy < H + rv)) continue;
     const int cy = static_cast<int>(std::lround(fy));
     for (int y = std::max(0, cy - riv - 1); y <= std::min(H - 1, cy + riv + 1); ++y) {
@@ -87,7 +93,7 @@ std::vector<uint8_t> coverage3d(const TileGrid& g, const double* u, const double
       for (int x = x0; x <= x1; ++x) {
         const size_t t = size_t(y) * W + x;
         if (covered[t] || std::isnan(surface[t])) continue;
-        const double dh = surface[t] - w[s];
+        const double dh = surface[t] - s.w[i];
         covered[t] = std::pow((x - fx) * g.du, 2) + dv2 + dh * dh <= r2;
       }
     }
@@ -124,19 +130,36 @@ Level makeLevel(int w, int h, int channels) {
   return L;
 }
 
-// Splat into the finest level: a smooth compact kernel of radius r (world units), or bilinear
-// weights onto the four nearest texel centres when r is under a texel.
-void splat(const TileGrid& g, const TileSamples& s, const Quadric& trend, double r, const Channels& ch, Level& L) {
+// Splat into the finest level: a smooth compact kernel of radius r (world units, times the
+// sample's scale), or bilinear weights onto the four nearest texel centres when that is under a
+// texel. With normals, a sample contributes its tangent plane at the texel, not its own height:
+// planes are reconstructed exactly and the surface near a tile's edge, reached by few samples,
+// follows their slope instead of bending toward the tile's trend.
+void splat(const TileGrid& g, const TileSamples& s, const Quadric& trend, double radius, const Channels& ch, Level& L) {
   const int W = g.width, H = g.height, C = ch.count;
+  std::vector<double> trendAt(size_t(W) * H);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) trendAt[size_t(y) * W + x] = trend(g.u0 + (x + 0.5) * g.du, g.v0 + (y + 0.5) * g.dv);
+  double gu = 0, gv = 0;  // the current sample's slope
   auto add = [&](size_t i, int x, int y, double wt) {
     const size_t t = size_t(y) * W + x;
+    const double tu = g.u0 + (x + 0.5) * g.du, tv = g.v0 + (y + 0.5) * g.dv;
     L.weight[t] += float(wt);
-    L.value[t] += wt * (s.w[i] - trend(s.u[i], s.v[i]));
+    L.value[t] += wt * (s.w[i] + gu * (tu - s.u[i]) + gv * (tv - s.v[i]) - trendAt[t]);
     if (C) ch.add(s, i, wt, &L.attr[t * C]);
   };
-  const bool kernel = r >= std::max(g.du, g.dv);
-  const double rx = r / g.du, ry = r / g.dv;
   for (size_t i = 0; i < s.n; ++i) {
+    gu = gv = 0;
+    if (s.normal) {
+      const float* n = &s.normal[3 * i];
+      if (n[2] > 0.1f) {  // slopes up to about 84 degrees
+        gu = -n[0] / n[2];
+        gv = -n[1] / n[2];
+      }
+    }
+    const double r = radius * (s.scale ? std::clamp(s.scale[i], 1.0f, kMaxScale) : 1.0f);
+    const bool kernel = r >= std::max(g.du, g.dv);
+    const double rx = r / g.du, ry = r / g.dv;
     const double fx = (s.u[i] - g.u0) / g.du - 0.5, fy = (s.v[i] - g.v0) / g.dv - 0.5;
     if (!kernel) {
       if (!(fx > -1.0 && fy > -1.0 && fx < W && fy < H)) continue;
@@ -243,14 +266,22 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
     const int i = static_cast<int>(t % size_t(W)), j = static_cast<int>(t / size_t(W));
     surface[t] = L.value[t] + trend(g.u0 + (i + 0.5) * g.du, g.v0 + (j + 0.5) * g.dv);
   }
-  const std::vector<uint8_t> covered = coverage3d(g, s.u, s.v, s.w, s.n, surface, opt.coverageRadius);
+  const std::vector<uint8_t> covered = coverage3d(g, s, surface, opt.coverageRadius);
+  out.wMin = g.wMin;
+  out.wMax = g.wMax;
+  if (opt.fitHeightRange)
+    for (size_t t = 0; t < surface.size(); ++t)
+      if (covered[t]) {
+        out.wMin = std::min(out.wMin, surface[t]);
+        out.wMax = std::max(out.wMax, surface[t]);
+      }
   out.heights.assign(size_t(W) * H, 0);
   out.rgba.assign(ch.color >= 0 ? size_t(W) * H * 4 : 0, 0);
   out.normals.assign(ch.normal >= 0 ? size_t(W) * H * 2 : 0, 0);
   out.covered = 0;
   for (size_t t = 0; t < out.heights.size(); ++t) {
     if (!covered[t]) continue;
-    out.heights[t] = encodeHeight(surface[t], g.wMin, g.wMax);
+    out.heights[t] = encodeHeight(surface[t], out.wMin, out.wMax);
     ++out.covered;
     const float* a = &L.attr[t * C];
     if (ch.color >= 0) {
@@ -307,6 +338,8 @@ void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, 
     }
   }
   out.heights.assign(size_t(W) * H, 0);
+  out.wMin = g.wMin;
+  out.wMax = g.wMax;
   out.rgba.clear();
   out.normals.assign(normals ? size_t(W) * H * 2 : 0, 0);
   out.covered = 0;

@@ -19,19 +19,23 @@ struct TileGrid {
 
 struct TileOutput {
   std::vector<uint16_t> heights;  // width * height; 0 = not covered
+  double wMin = 0, wMax = 0;      // the height range the heights encode
   std::vector<uint8_t> normals;   // width * height * 2 (encodeNormal, frame components) when normals were given
   std::vector<uint8_t> rgba;      // width * height * 4 when colours were given
   size_t covered = 0;
 };
 
-// Samples of one cell in its frame. normal (3 per sample, frame components, unit) and rgb (3
-// per sample) may be null.
+// Samples of one cell in its frame. normal (3 per sample, frame components, unit), rgb (3 per
+// sample) and scale (1 per sample) may be null.
 struct TileSamples {
   const double* u = nullptr;
   const double* v = nullptr;
   const double* w = nullptr;
   const float* normal = nullptr;
   const uint8_t* rgb = nullptr;
+  // The sample's local spacing over the pack's: its splat and coverage radii are the options'
+  // times this (at least 1), so a region seen by one scan of several is not peppered with holes.
+  const float* scale = nullptr;
   size_t n = 0;
 };
 
@@ -43,6 +47,9 @@ struct SplatOptions {
   // A texel is covered when its reconstructed surface point lies within this 3-D distance of
   // a sample.
   double coverageRadius = 0;
+  // Widen [wMin, wMax] to hold every covered texel's height (else heights outside are clamped,
+  // and a clamped height is a flat floor or ceiling a ray would hit at the box's face).
+  bool fitHeightRange = false;
 };
 
 void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& opt, TileOutput& out);

@@ -1,0 +1,37 @@
+// Point path: the samples of neighbouring cells that continue a cell's surface into its tile's
+// margin. Each cell's height map reaches the coverage radius past its own points; built from
+// its own points alone, two neighbouring cells' surfaces would each be extrapolated there and
+// a ray crossing the surface near their border could pass between them (a pinhole). With the
+// neighbours' samples in the margin, both cells reconstruct the border from the same points.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace sa {
+
+class MarginFinder {
+ public:
+  // pos: the chunk's points, xyz interleaved (kept by reference); nrm: their unit normals.
+  MarginFinder(const double* pos, const float* nrm, size_t n);
+  ~MarginFinder();
+
+  struct Cell {
+    Eigen::Vector3d origin, u, v, w;
+    double ext[6];              // the cell's own points' extents in its frame
+    uint32_t first, count;      // its points: [first, first + count) of the chunk
+  };
+  // Points outside the cell within `radius` of one of its points, inside its extents grown by
+  // `radius` in u and v, facing its +W side (normal . w > minCos); appended to `out`.
+  void find(const Cell& c, double radius, double minCos, std::vector<uint32_t>& out) const;
+
+ private:
+  struct Index;
+  const double* pos_;
+  const float* nrm_;
+  std::unique_ptr<Index> index_;
+};
+
+}  // namespace sa
