@@ -134,6 +134,10 @@ int cmdConvert(int argc, char** argv) {
     dopt.speed = int(*v);
   }
   auto input = InputSet::open(a.positionals(), a.get("columns"));
+  if (input) {
+    Status used = checkNotAnInput(out, input->allPaths(), "-o");
+    if (!used) return reportError(used);
+  }
   if (!input) return reportError(input.status());
   for (const auto& in : input->sourcePaths()) {
     std::error_code ec;

@@ -110,6 +110,12 @@ Status parseOptions(const Args& a, const PackReader& pack, Options& o) {
   if (a.has("plot") && !a.has("reference"))
     return Status::badInput("--plot draws run time against the reference's depth error and IoU: give --reference");
   o.far = a.flag("far") || !a.has("reference");
+  std::vector<std::string> inputs = packSources(pack);  // the far measure and points mode read them
+  inputs.insert(inputs.end(), {a.positionals()[0], a.get("reference"), a.get("path")});
+  for (const char* opt : {"csv", "plot"})
+    if (a.has(opt)) SA_RETURN_IF_ERROR(checkNotAnInput(a.get(opt), inputs, std::string("--") + opt));
+  if (a.has("plot"))
+    SA_RETURN_IF_ERROR(checkNotAnInput(std::filesystem::path(a.get("plot")).replace_extension(".svg").string(), inputs, "--plot"));
   o.json = a.flag("json");
   o.quiet = a.flag("quiet") || o.json;
   return Status::ok();

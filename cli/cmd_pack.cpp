@@ -9,6 +9,7 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/progress.h"
+#include "common/fileio.h"
 #include "preprocess/pipeline.h"
 
 namespace sa {
@@ -167,6 +168,8 @@ int cmdPack(int argc, char** argv) {
 
   auto input = InputSet::open(a.positionals(), a.get("columns"));
   if (!input) return reportError(input.status());
+  s = checkNotAnInput(out, input->allPaths(), "-o");
+  if (!s) return reportError(s);
   const bool quiet = a.flag("quiet");
   for (const auto& w : input->warnings())
     if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", w.c_str());

@@ -6,7 +6,9 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/view_setup.h"
+#include "common/fileio.h"
 #include "viewer/egl_context.h"
+#include "viewer/image_io.h"
 #include "viewer/renderer.h"
 
 namespace sa {
@@ -30,7 +32,7 @@ const char* kHelp =
     "  --size WxH             image size (default 1024x1024)\n"
     "\n"
     "options:\n"
-    "  -o, --output FILE      PNG to write\n"
+    "  -o, --output FILE      the image to write: .png, or .jpg (JPEG, quality 92)\n"
     "  --depth-out FILE.pfm   also write float32 linear view depth (distance along the camera's\n"
     "                         forward axis, world units; inf where nothing was hit)\n"
     "  --iterations N         linear ray-march steps per height field (default 12)\n"
@@ -51,6 +53,86 @@ const char* kHelp =
 std::string indexed(const std::string& path, int i) {
   std::filesystem::path p(path);
   return (p.parent_path() / (p.stem().string() + "_" + std::to_string(i) + p.extension().string())).string();
+}
+
+// Shading, clipping, march and skip options.
+Status settingsFromArgs(const Args& a, RenderSettings& rs) {
+  if (a.has("iterations")) {
+    auto v = parseInt("iterations", a.get("iterations"), 1, 1024);
+    if (!v) return v.status();
+    rs.iterations = static_cast<int>(*v);
+  }
+  if (a.has("refine")) {
+    auto v = parseInt("refine", a.get("refine"), 0, 64);
+    if (!v) return v.status();
+    rs.refineSteps = static_cast<int>(*v);
+  }
+  if (a.has("background")) {
+    auto v = parseVec3("background", a.get("background"));
+    if (!v) return v.status();
+    for (int i = 0; i < 3; ++i) rs.background[i] = float(std::clamp((*v)[i], 0.0, 1.0));
+  }
+  rs.useColor = !a.flag("no-color");
+  if (a.has("shading")) {
+    const std::string sh = a.get("shading");
+    if (sh == "lambert") rs.shading = Shading::kLambert;
+    else if (sh == "normals") rs.shading = Shading::kNormals;
+    else if (sh == "height") rs.shading = Shading::kHeight;
+    else if (sh == "color" || sh == "colour") rs.useColor = true;
+    else return Status::badInput("--shading: expected lambert, normals, height or color, got '" + sh + "'");
+  }
+  rs.edl = a.flag("edl");
+  rs.showBoxes = a.flag("boxes");
+  std::vector<double> n;
+  if (a.has("clip-box")) {
+    SA_RETURN_IF_ERROR(numberList(a, "clip-box", 6, n));
+    rs.clip.box = true;
+    rs.clip.lo = Eigen::Vector3d(std::min(n[0], n[3]), std::min(n[1], n[4]), std::min(n[2], n[5]));
+    rs.clip.hi = Eigen::Vector3d(std::max(n[0], n[3]), std::max(n[1], n[4]), std::max(n[2], n[5]));
+  }
+  if (a.has("section")) {
+    SA_RETURN_IF_ERROR(numberList(a, "section", 6, n));
+    rs.clip.plane = true;
+    rs.clip.point = Eigen::Vector3d(n[0], n[1], n[2]);
+    rs.clip.normal = Eigen::Vector3d(n[3], n[4], n[5]);
+    if (rs.clip.normal.norm() == 0) return Status::badInput("--section: the normal must not be zero");
+  }
+  rs.cull.frustum = !a.flag("no-frustum-cull");
+  rs.cull.backfaceCull = !a.flag("no-backface-cull");
+  rs.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
+  rs.cull.subpixelSplats = !a.flag("no-splats");
+  rs.cull.frontToBack = !a.flag("no-sort");
+  return Status::ok();
+}
+
+struct Outputs {
+  std::vector<std::string> images, depths;  // one per camera (depths empty without --depth-out)
+};
+
+// The file names each view writes (OUT_i.png for several views), checked before any work: a
+// known image type, a .pfm depth, never one of the command's inputs; their folders created.
+Status outputsFromArgs(const Args& a, size_t views, Outputs& out) {
+  SA_RETURN_IF_ERROR(checkImageExtension(a.get("output")));
+  if (a.has("depth-out") && lowerExtension(a.get("depth-out")) != ".pfm")
+    return Status::badInput(a.get("depth-out") + ": --depth-out writes PFM; name it .pfm");
+  std::vector<std::string> inputs = {a.positionals()[0]};
+  if (a.has("path")) inputs.push_back(a.get("path"));
+  for (size_t i = 0; i < views; ++i) {
+    out.images.push_back(views > 1 ? indexed(a.get("output"), int(i)) : a.get("output"));
+    SA_RETURN_IF_ERROR(checkNotAnInput(out.images.back(), inputs, "-o"));
+    if (!a.has("depth-out")) continue;
+    out.depths.push_back(views > 1 ? indexed(a.get("depth-out"), int(i)) : a.get("depth-out"));
+    SA_RETURN_IF_ERROR(checkNotAnInput(out.depths.back(), inputs, "--depth-out"));
+  }
+  // Output folders are created as needed (render -o views/bunny.png).
+  for (const char* opt : {"output", "depth-out"}) {
+    if (!a.has(opt)) continue;
+    const std::filesystem::path dir = std::filesystem::path(a.get(opt)).parent_path();
+    std::error_code ec;
+    if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+    if (ec) return Status::badInput(dir.string() + ": cannot create the output folder: " + ec.message());
+  }
+  return Status::ok();
 }
 
 }  // namespace
@@ -76,62 +158,12 @@ int cmdRender(int argc, char** argv) {
   s = camerasFromArgs(a, pack, 0, 1024, cams);
   if (!s) return reportError(s);
   RenderSettings rs;
-  if (a.has("iterations")) {
-    auto v = parseInt("iterations", a.get("iterations"), 1, 1024);
-    if (!v) return reportError(v.status());
-    rs.iterations = static_cast<int>(*v);
-  }
-  if (a.has("refine")) {
-    auto v = parseInt("refine", a.get("refine"), 0, 64);
-    if (!v) return reportError(v.status());
-    rs.refineSteps = static_cast<int>(*v);
-  }
-  if (a.has("background")) {
-    auto v = parseVec3("background", a.get("background"));
-    if (!v) return reportError(v.status());
-    for (int i = 0; i < 3; ++i) rs.background[i] = float(std::clamp((*v)[i], 0.0, 1.0));
-  }
-  rs.useColor = !a.flag("no-color");
-  if (a.has("shading")) {
-    const std::string sh = a.get("shading");
-    if (sh == "lambert") rs.shading = Shading::kLambert;
-    else if (sh == "normals") rs.shading = Shading::kNormals;
-    else if (sh == "height") rs.shading = Shading::kHeight;
-    else if (sh == "color" || sh == "colour") rs.useColor = true;
-    else return reportError(Status::badInput("--shading: expected lambert, normals, height or color, got '" + sh + "'"));
-  }
+  s = settingsFromArgs(a, rs);
+  if (!s) return reportError(s);
   rs.up = cams[0].up;
-  rs.edl = a.flag("edl");
-  rs.showBoxes = a.flag("boxes");
-  std::vector<double> n;
-  if (a.has("clip-box")) {
-    s = numberList(a, "clip-box", 6, n);
-    if (!s) return reportError(s);
-    rs.clip.box = true;
-    rs.clip.lo = Eigen::Vector3d(std::min(n[0], n[3]), std::min(n[1], n[4]), std::min(n[2], n[5]));
-    rs.clip.hi = Eigen::Vector3d(std::max(n[0], n[3]), std::max(n[1], n[4]), std::max(n[2], n[5]));
-  }
-  if (a.has("section")) {
-    s = numberList(a, "section", 6, n);
-    if (!s) return reportError(s);
-    rs.clip.plane = true;
-    rs.clip.point = Eigen::Vector3d(n[0], n[1], n[2]);
-    rs.clip.normal = Eigen::Vector3d(n[3], n[4], n[5]);
-    if (rs.clip.normal.norm() == 0) return reportError(Status::badInput("--section: the normal must not be zero"));
-  }
-  rs.cull.frustum = !a.flag("no-frustum-cull");
-  rs.cull.backfaceCull = !a.flag("no-backface-cull");
-  rs.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
-  rs.cull.subpixelSplats = !a.flag("no-splats");
-  rs.cull.frontToBack = !a.flag("no-sort");
-  // Output folders are created as needed (render -o views/bunny.png).
-  for (const char* opt : {"output", "depth-out"}) {
-    if (!a.has(opt)) continue;
-    const std::filesystem::path dir = std::filesystem::path(a.get(opt)).parent_path();
-    std::error_code ec;
-    if (!dir.empty()) std::filesystem::create_directories(dir, ec);
-    if (ec) return reportError(Status::badInput(dir.string() + ": cannot create the output folder: " + ec.message()));
-  }
+  Outputs outputs;
+  s = outputsFromArgs(a, cams.size(), outputs);
+  if (!s) return reportError(s);
   EglContext ctx;
   s = ctx.init();
   if (!s) return reportError(s);
@@ -139,34 +171,25 @@ int cmdRender(int argc, char** argv) {
   s = renderer.init(pack);
   if (!s) return reportError(s);
   const bool quiet = a.flag("quiet"), json = a.flag("json");
-  const bool many = cams.size() > 1;
   std::vector<double> times;
   if (json) std::printf("{\"renderer\": \"%s\", \"views\": [", jsonEscape(ctx.renderer()).c_str());
   for (size_t i = 0; i < cams.size(); ++i) {
     FrameResult fr;
     s = renderer.render(cams[i], rs, fr, a.has("depth-out"));
     if (!s) return reportError(s);
-    const std::string png = many ? indexed(a.get("output"), int(i)) : a.get("output");
-    s = writePng(png, fr.color);
+    const std::string& image = outputs.images[i];
+    s = writeImage(image, fr.color);
     if (!s) return reportError(s);
     if (a.has("depth-out")) {
-      const std::string pfm = many ? indexed(a.get("depth-out"), int(i)) : a.get("depth-out");
-      s = writePfm(pfm, cams[i].width, cams[i].height, fr.depth);
+      s = writePfm(outputs.depths[i], cams[i].width, cams[i].height, fr.depth);
       if (!s) return reportError(s);
-    }
-    size_t hit = 0;
-    for (size_t k = 0; k < fr.color.rgba.size(); k += 4) {
-      const bool bg = fr.color.rgba[k] == uint8_t(rs.background[0] * 255 + 0.5f) &&
-                      fr.color.rgba[k + 1] == uint8_t(rs.background[1] * 255 + 0.5f) &&
-                      fr.color.rgba[k + 2] == uint8_t(rs.background[2] * 255 + 0.5f);
-      hit += !bg;
     }
     times.push_back(fr.milliseconds);
     if (json) {
       std::printf("%s{\"file\": \"%s\", \"ms\": %.3f, \"cells\": %u, \"width\": %d, \"height\": %d}", i ? ", " : "",
-                  jsonEscape(png).c_str(), fr.milliseconds, fr.cellsDrawn, cams[i].width, cams[i].height);
+                  jsonEscape(image).c_str(), fr.milliseconds, fr.cellsDrawn, cams[i].width, cams[i].height);
     } else if (!quiet) {
-      std::fprintf(stderr, "%s: %dx%d, %u cells, %.1f ms\n", png.c_str(), cams[i].width, cams[i].height, fr.cellsDrawn,
+      std::fprintf(stderr, "%s: %dx%d, %u cells, %.1f ms\n", image.c_str(), cams[i].width, cams[i].height, fr.cellsDrawn,
                    fr.milliseconds);
     }
   }

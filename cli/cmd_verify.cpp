@@ -31,8 +31,9 @@ int cmdVerify(int argc, char** argv) {
     for (size_t i = 0; i < r.problems.size(); ++i) std::printf("%s\"%s\"", i ? ", " : "", jsonEscape(r.problems[i]).c_str());
     std::printf("]}\n");
   } else if (r.problems.empty()) {
-    std::printf("%s: OK (%llu cells, %llu gutter texels, every checksum)\n", pack.path().c_str(),
-                (unsigned long long)r.cellsChecked, (unsigned long long)r.texelsChecked);
+    std::printf("%s: OK (%llu cell%s, %llu gutter texel%s, every checksum)\n", pack.path().c_str(),
+                (unsigned long long)r.cellsChecked, r.cellsChecked == 1 ? "" : "s", (unsigned long long)r.texelsChecked,
+                r.texelsChecked == 1 ? "" : "s");
   } else {
     for (const auto& p : r.problems) std::fprintf(stderr, "%s: %s\n", pack.path().c_str(), p.c_str());
   }

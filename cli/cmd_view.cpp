@@ -3,10 +3,38 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/progress.h"
+#include "common/fileio.h"
 #include "preprocess/pipeline.h"
 #include "window/viewer_app.h"
 
 namespace sa {
+namespace {
+
+// A scan given to view is packed into SCAN.hfa beside it (reused while the input and the
+// options are unchanged), with pack's progress bar and summary line.
+Result<std::string> packForView(const std::string& path, bool quiet) {
+  auto input = InputSet::open({path});
+  if (!input) return input.status();
+  const std::string cache =
+      (std::filesystem::path(path).parent_path() / (std::filesystem::path(path).stem().string() + ".hfa")).string();
+  SA_RETURN_IF_ERROR(checkNotAnInput(cache, input->allPaths(), "the view cache"));
+  PackOptions po;
+  po.commandLine = "view " + path;
+  if (!quiet) std::fprintf(stderr, "view: packing %s into %s\n", path.c_str(), cache.c_str());
+  Progress progress(!quiet, "view");
+  PackSummary sum;
+  Status s = packInput(*input, cache, po, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
+  progress.finish();
+  SA_RETURN_IF_ERROR(s);
+  if (!quiet && sum.upToDate) std::fprintf(stderr, "view: %s is up to date\n", cache.c_str());
+  if (!quiet && !sum.upToDate)
+    std::fprintf(stderr, "view: packed %llu points into %u cells, %.1f MiB, in %.1f s\n", (unsigned long long)sum.pointsRead,
+                 sum.cells, sum.fileBytes / 1048576.0, sum.seconds[5]);
+  return cache;
+}
+
+}  // namespace
 
 int cmdView(int argc, char** argv) {
   Args a;
@@ -42,25 +70,10 @@ int cmdView(int argc, char** argv) {
     if (!s) return reportError(s);
   }
   std::string path = a.positionals()[0];
-  const std::string ext = std::filesystem::path(path).extension().string();
-  if (ext != ".hfa") {
-    auto input = InputSet::open({path});
-    if (!input) return reportError(input.status());
-    const std::string cache = (std::filesystem::path(path).parent_path() /
-                               (std::filesystem::path(path).stem().string() + ".hfa")).string();
-    PackSummary sum;
-    PackOptions po;
-    po.commandLine = "view " + path;
-    if (!opt.quiet) std::fprintf(stderr, "view: packing %s into %s...\n", path.c_str(), cache.c_str());
-    s = packInput(*input, cache, po,
-                  [&](const char* phase, uint64_t done, uint64_t total) {
-                    if (!opt.quiet && total && (done == total))
-                      std::fprintf(stderr, "  %s done (%llu points)\n", phase, (unsigned long long)total);
-                  },
-                  sum);
-    if (!s) return reportError(s);
-    if (!opt.quiet && sum.upToDate) std::fprintf(stderr, "view: %s is up to date\n", cache.c_str());
-    path = cache;
+  if (lowerExtension(path) != ".hfa") {
+    auto cache = packForView(path, opt.quiet);
+    if (!cache) return reportError(cache.status());
+    path = *cache;
   }
   return runViewer(path, opt);
 }

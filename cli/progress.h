@@ -11,8 +11,9 @@ namespace sa {
 
 class Progress {
  public:
-  explicit Progress(bool enabled, const char* command = "pack")
-      : enabled_(enabled), tty_(isatty(2)), command_(command), start_(Clock::now()) {}
+  // unit: what is counted ("pts" shown in millions, anything else as is).
+  explicit Progress(bool enabled, const char* command = "pack", const char* unit = "pts")
+      : enabled_(enabled), tty_(isatty(2)), command_(command), unit_(unit), start_(Clock::now()) {}
   void operator()(const char* phase, uint64_t done, uint64_t total) {
     if (!enabled_) return;
     const auto now = Clock::now();
@@ -31,9 +32,14 @@ class Progress {
     const int width = 30, filled = static_cast<int>(frac * width);
     std::string bar(size_t(filled), '#');
     bar.resize(width, '.');
-    const double rate = secs > 0 ? double(done) / secs / 1e6 : 0;
-    std::fprintf(stderr, "\r%-10s [%s] %5.1f%%  %.2fM/%.2fM pts  %.2f Mpts/s  %.1fs ", phase, bar.c_str(),
-                 100 * frac, done / 1e6, total / 1e6, rate, secs);
+    const bool millions = std::string(unit_) == "pts";
+    const double scale = millions ? 1e6 : 1;
+    const double rate = secs > 0 ? double(done) / secs / scale : 0;
+    char eta[64] = "";
+    if (done > 0 && done < total && secs > 1) std::snprintf(eta, sizeof(eta), ", ~%.0fs left", secs * double(total - done) / double(done));
+    std::fprintf(stderr, "\r%-10s [%s] %5.1f%%  %.*f%s/%.*f%s %s  %.2f %s%s/s  %.1fs%s   ", phase, bar.c_str(), 100 * frac,
+                 millions ? 2 : 0, done / scale, millions ? "M" : "", millions ? 2 : 0, total / scale, millions ? "M" : "",
+                 unit_, rate, millions ? "M" : "", unit_, secs, eta);
     std::fflush(stderr);
   }
   void finish() {
@@ -44,6 +50,7 @@ class Progress {
   using Clock = std::chrono::steady_clock;
   bool enabled_, tty_;
   const char* command_;
+  const char* unit_;
   std::string phase_;
   Clock::time_point start_, phaseStart_, last_;
 };

@@ -193,4 +193,16 @@ std::string lowerExtension(const std::string& path) {
   return e;
 }
 
+Status checkNotAnInput(const std::string& output, const std::vector<std::string>& inputs, const std::string& what) {
+  struct stat out;
+  if (::stat(output.c_str(), &out) != 0) return Status::ok();  // not there yet: cannot be an input
+  for (const std::string& in : inputs) {
+    struct stat st;
+    if (::stat(in.c_str(), &st) == 0 && st.st_dev == out.st_dev && st.st_ino == out.st_ino)
+      return Status::badInput(what + " " + output + " is " + (in == output ? "an input of this command" : "the input " + in) +
+                              "; refusing to overwrite it (choose another output name)");
+  }
+  return Status::ok();
+}
+
 }  // namespace sa

@@ -91,6 +91,9 @@ std::string directoryOf(const std::string& path);
 std::string lowerExtension(const std::string& path);
 std::string joinPath(const std::string& dir, const std::string& name);
 Status writeFileAtomic(const std::string& path, const void* data, size_t n);
+// A bad-input error when `output` is the same file as one of `inputs` (also through a symbolic
+// or hard link): a command must never overwrite what it reads. `what` names the output option.
+Status checkNotAnInput(const std::string& output, const std::vector<std::string>& inputs, const std::string& what);
 Result<uint64_t> fileSize(const std::string& path);
 
 }  // namespace sa

@@ -58,6 +58,40 @@ Status addLas(const std::string& path, std::vector<InputFile>& out, bool& terrai
   return Status::ok();
 }
 
+// Stanford's scans carry three "bye" header lines each: one warning line per kind of skipped
+// header line (with a count and the first place), not one per line of every file.
+std::vector<std::string> summarizeWarnings(const std::vector<std::string>& in) {
+  const std::string marker = ": skipped unknown header line ";
+  struct Group { std::string first; size_t lines = 0; std::vector<std::string> files; };
+  std::vector<std::pair<std::string, Group>> groups;
+  std::vector<std::string> out;
+  for (const std::string& w : in) {
+    const size_t at = w.find(marker);
+    if (at == std::string::npos) {
+      out.push_back(w);
+      continue;
+    }
+    const std::string text = w.substr(at + marker.size());
+    const std::string file = w.substr(0, w.rfind(':', at - 1));
+    auto g = std::find_if(groups.begin(), groups.end(), [&](const auto& e) { return e.first == text; });
+    if (g == groups.end()) {
+      groups.push_back({text, Group{w.substr(0, at), 0, {}}});
+      g = groups.end() - 1;
+    }
+    ++g->second.lines;
+    if (std::find(g->second.files.begin(), g->second.files.end(), file) == g->second.files.end()) g->second.files.push_back(file);
+  }
+  for (const auto& [text, g] : groups) {
+    if (g.lines == 1) {
+      out.push_back(g.first + marker + text);
+      continue;
+    }
+    out.push_back("skipped " + std::to_string(g.lines) + " unknown header lines " + text + " in " +
+                  std::to_string(g.files.size()) + " file(s), first at " + g.first + " (Stanford's scans have them)");
+  }
+  return out;
+}
+
 // Adapts one file's batches: alignment transform, scan index, attribute harmonisation.
 class FileAdapter : public BatchSink {
  public:
@@ -224,6 +258,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
     }
   }
   if (set.pointCount() == 0) return Status::badInput(paths[0] + ": the input holds no points");
+  set.warnings_ = summarizeWarnings(set.warnings_);
   return set;
 }
 

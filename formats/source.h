@@ -61,6 +61,13 @@ class InputSet {
   std::pair<std::string, uint64_t> locate(uint64_t i) const;
   // The paths the user named (absolute), before scan sets were expanded.
   const std::vector<std::string>& sourcePaths() const { return sourcePaths_; }
+  // Every file this input reads: the named ones and a scan set's scans (for checking that an
+  // output is none of them).
+  std::vector<std::string> allPaths() const {
+    std::vector<std::string> out = sourcePaths_;
+    for (const InputFile& f : files_) out.push_back(f.path);
+    return out;
+  }
 
   // Streams every file in order. Point batches carry aligned positions, the scan index when
   // the input is a scan set, normals, intensity, confidence and classification only when every

@@ -6,7 +6,7 @@ pkgs=(
   build-essential cmake ninja-build ccache pkg-config
   libeigen3-dev libflann-dev liblz4-dev libtbb-dev zlib1g-dev libpng-dev libopenmesh-dev
   libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
-  libglfw3-dev libimgui-dev xvfb xauth
+  libglfw3-dev libimgui-dev libstb-dev xvfb xauth
   libgtest-dev libgmock-dev libbenchmark-dev nlohmann-json3-dev libxxhash-dev
   libpcl-dev libdraco-dev
 )

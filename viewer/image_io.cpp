@@ -1,6 +1,7 @@
 #include "viewer/image_io.h"
 
 #include <png.h>
+#include <stb/stb_image_write.h>
 
 #include <cstdio>
 #include <cstring>
@@ -25,6 +26,25 @@ Status writePng(const std::string& path, const Image& img) {
   if (!png_image_write_to_memory(&pi, buf.data(), &size, 0, img.rgba.data(), 0, nullptr))
     return Status::internal(path + ": PNG encoding failed: " + pi.message);
   return writeFileAtomic(path, buf.data(), size);
+}
+
+Status checkImageExtension(const std::string& path) {
+  const std::string ext = lowerExtension(path);
+  if (ext == ".png" || ext == ".jpg" || ext == ".jpeg") return Status::ok();
+  return Status::badInput(path + ": unknown image type '" + ext + "'; write .png or .jpg");
+}
+
+Status writeImage(const std::string& path, const Image& img) {
+  SA_RETURN_IF_ERROR(checkImageExtension(path));
+  if (lowerExtension(path) == ".png") return writePng(path, img);
+  std::vector<uint8_t> buf;
+  auto sink = [](void* ctx, void* data, int size) {
+    auto* b = static_cast<std::vector<uint8_t>*>(ctx);
+    b->insert(b->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
+  };
+  if (!stbi_write_jpg_to_func(sink, &buf, img.width, img.height, 4, img.rgba.data(), 92))
+    return Status::internal(path + ": JPEG encoding failed");
+  return writeFileAtomic(path, buf.data(), buf.size());
 }
 
 Result<Image> readPng(const std::string& path) {

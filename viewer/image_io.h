@@ -1,4 +1,4 @@
-// PNG (libpng) and PFM output, written atomically.
+// PNG (libpng), JPEG (stb_image_write) and PFM output, written atomically.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -14,6 +14,11 @@ struct Image {
 };
 
 Status writePng(const std::string& path, const Image& img);
+// By the file's extension: .png (libpng) or .jpg / .jpeg (stb_image_write, quality 92);
+// any other extension is a bad-input error naming the file.
+Status writeImage(const std::string& path, const Image& img);
+// Checks the extension writeImage needs, before any work.
+Status checkImageExtension(const std::string& path);
 Result<Image> readPng(const std::string& path);
 // Single-channel float PFM ("Pf"), little-endian; depth row 0 is the top row of the image.
 Status writePfm(const std::string& path, int width, int height, const std::vector<float>& values);

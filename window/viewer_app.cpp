@@ -25,11 +25,14 @@
 #include "viewer/camera_path.h"
 #include "viewer/renderer.h"
 #include "viewer/source_points.h"
+#include "window/script.h"
+#include "common/fileio.h"
 
 namespace sa {
 
 const char* kViewerScriptHelp =
-    "Script commands (one per line, '#' comments; each runs on its own frame):\n"
+    "Script commands (one per line, '#' comments; each runs on its own frame; the whole script\n"
+    "is checked before the window opens):\n"
     "  size W H                       resize the window\n"
     "  camera EX EY EZ TX TY TZ [UX UY UZ [FOV]]   set the camera (world coordinates)\n"
     "  orbit DX DY | pan DX DY        drag by pixels (orbit about the pivot)\n"
@@ -41,7 +44,7 @@ const char* kViewerScriptHelp =
     "  clear                          forget the picks\n"
     "  clip box X0 Y0 Z0 X1 Y1 Z1 | clip plane PX PY PZ NX NY NZ | clip off\n"
     "  shading lambert|normals|height|color | edl on|off | boxes on|off | iterations N\n"
-    "  screenshot FILE.png [W H]      the current view, at window resolution or W x H\n"
+    "  screenshot FILE.png [W H]      the current view, at window resolution or W x H (.png or .jpg)\n"
     "  windowshot FILE.png            the whole window, panel included\n"
     "  bookmark                       append the camera to PACK.views.json\n"
     "  wait N                         render N frames\n"
@@ -144,7 +147,7 @@ Status screenshot(AppState& s, const std::string& path, int width = 0, int heigh
     cam.height = height;
   }
   SA_RETURN_IF_ERROR(s.renderer->render(cam, s.rs, fr, kReadColor));
-  SA_RETURN_IF_ERROR(writePng(path, fr.color));
+  SA_RETURN_IF_ERROR(writeImage(path, fr.color));
   s.status = "saved " + path;
   return Status::ok();
 }
@@ -162,31 +165,18 @@ Status bookmark(AppState& s) {
   return Status::ok();
 }
 
-// Runs one script line. Returns false on `quit`.
-Status runCommand(AppState& s, GLFWwindow* win, const std::string& line, bool& quit, int& waitFrames) {
-  std::istringstream is(line);
-  std::string cmd;
-  if (!(is >> cmd) || cmd[0] == '#') return Status::ok();
-  std::vector<double> v;
-  std::vector<std::string> words;
-  for (std::string w; is >> w;) {
-    words.push_back(w);
-    char* end = nullptr;
-    const double x = std::strtod(w.c_str(), &end);
-    if (end && *end == '\0') v.push_back(x);
-  }
-  auto need = [&](size_t n) {
-    return v.size() >= n ? Status::ok() : Status::badInput("script: '" + line + "': expected " + std::to_string(n) + " numbers");
-  };
+// Runs one (parsed, checked) script command; sets `quit` on quit.
+Status runCommand(AppState& s, GLFWwindow* win, const ScriptCommand& c, bool& quit, int& waitFrames) {
+  const std::string& cmd = c.name;
+  const std::vector<double>& v = c.numbers;
+  const std::vector<std::string>& words = c.words;
   Camera& cam = s.cc.camera();
   if (cmd == "quit") {
     quit = true;
   } else if (cmd == "size") {
-    SA_RETURN_IF_ERROR(need(2));
     glfwSetWindowSize(win, int(v[0]), int(v[1]));
     waitFrames = 2;
   } else if (cmd == "camera") {
-    SA_RETURN_IF_ERROR(need(6));
     cam.eye = Eigen::Vector3d(v[0], v[1], v[2]);
     cam.target = Eigen::Vector3d(v[3], v[4], v[5]);
     if (v.size() >= 9) cam.up = Eigen::Vector3d(v[6], v[7], v[8]);
@@ -194,13 +184,10 @@ Status runCommand(AppState& s, GLFWwindow* win, const std::string& line, bool& q
     s.pivot = cam.target;
     SA_RETURN_IF_ERROR(cam.validate());
   } else if (cmd == "orbit") {
-    SA_RETURN_IF_ERROR(need(2));
     s.cc.orbit(s.pivot, v[0], v[1]);
   } else if (cmd == "pan") {
-    SA_RETURN_IF_ERROR(need(2));
     s.cc.pan(v[0], v[1], (s.pivot - cam.eye).dot(cam.forward()));
   } else if (cmd == "zoom") {
-    SA_RETURN_IF_ERROR(need(3));
     const float d = s.renderer->depthAt(int(v[0]), int(v[1]));
     s.cc.zoomToCursor(v[0], v[1], std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward()), v[2]);
   } else if (cmd == "frame") {
@@ -209,51 +196,43 @@ Status runCommand(AppState& s, GLFWwindow* win, const std::string& line, bool& q
     s.cc.preset(cmd == "top" ? CameraController::Preset::kTop
                 : cmd == "front" ? CameraController::Preset::kFront : CameraController::Preset::kSide, s.lo, s.hi);
   } else if (cmd == "pick") {
-    SA_RETURN_IF_ERROR(need(2));
     addPick(s, v[0], v[1]);
   } else if (cmd == "distance" || cmd == "polyline" || cmd == "height") {
     measure(s, cmd);
   } else if (cmd == "clear") {
     s.picks.clear();
   } else if (cmd == "clip") {
-    if (words.empty()) return Status::badInput("script: clip box|plane|off");
     if (words[0] == "off") {
       s.rs.clip = ClipSettings{};
-    } else if (words[0] == "box" && v.size() >= 6) {
+    } else if (words[0] == "box") {
       s.rs.clip.box = true;
       s.rs.clip.lo = Eigen::Vector3d(v[0], v[1], v[2]).cwiseMin(Eigen::Vector3d(v[3], v[4], v[5]));
       s.rs.clip.hi = Eigen::Vector3d(v[0], v[1], v[2]).cwiseMax(Eigen::Vector3d(v[3], v[4], v[5]));
-    } else if (words[0] == "plane" && v.size() >= 6) {
+    } else {
       s.rs.clip.plane = true;
       s.rs.clip.point = Eigen::Vector3d(v[0], v[1], v[2]);
       s.rs.clip.normal = Eigen::Vector3d(v[3], v[4], v[5]);
-    } else {
-      return Status::badInput("script: '" + line + "': clip box X0 Y0 Z0 X1 Y1 Z1 | clip plane PX PY PZ NX NY NZ | clip off");
     }
-  } else if (cmd == "shading" && !words.empty()) {
+  } else if (cmd == "shading") {
     const std::string m = words[0];
     s.rs.useColor = m == "color";
     s.rs.shading = m == "normals" ? Shading::kNormals : m == "height" ? Shading::kHeight : Shading::kLambert;
     s.shadingChoice = m == "color" ? 3 : int(s.rs.shading);
-  } else if (cmd == "edl" && !words.empty()) {
+  } else if (cmd == "edl") {
     s.rs.edl = words[0] == "on";
-  } else if (cmd == "boxes" && !words.empty()) {
+  } else if (cmd == "boxes") {
     s.rs.showBoxes = words[0] == "on";
   } else if (cmd == "iterations") {
-    SA_RETURN_IF_ERROR(need(1));
     s.rs.iterations = std::max(1, int(v[0]));
-  } else if (cmd == "screenshot" && !words.empty()) {
+  } else if (cmd == "screenshot") {
     SA_RETURN_IF_ERROR(screenshot(s, words[0], v.size() >= 2 ? int(v[0]) : 0, v.size() >= 2 ? int(v[1]) : 0));
     waitFrames = 1;  // the next frame renders at window size again
-  } else if (cmd == "windowshot" && !words.empty()) {
+  } else if (cmd == "windowshot") {
     s.pendingWindowShot = words[0];
   } else if (cmd == "bookmark") {
     SA_RETURN_IF_ERROR(bookmark(s));
   } else if (cmd == "wait") {
-    SA_RETURN_IF_ERROR(need(1));
     waitFrames = int(v[0]);
-  } else {
-    return Status::badInput("script: unknown command '" + line + "'");
   }
   return Status::ok();
 }
@@ -402,14 +381,23 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     std::fprintf(stderr, "scanatlas: error: %s\n(run 'scanatlas info' on it, or repack)\n", st.message().c_str());
     return 2;
   }
-  std::vector<std::string> script;
+  // The script is read and checked whole before the window opens.
+  std::vector<ScriptCommand> script;
+  const std::vector<std::string> inputs = {packPath, opt.scriptPath};
   if (!opt.scriptPath.empty()) {
-    std::ifstream in(opt.scriptPath);
-    if (!in) {
-      std::fprintf(stderr, "scanatlas: error: %s: cannot open script\n", opt.scriptPath.c_str());
+    auto loaded = loadScript(opt.scriptPath, inputs);
+    if (!loaded) {
+      std::fprintf(stderr, "scanatlas: error: %s\n", loaded.status().message().c_str());
       return 2;
     }
-    for (std::string l; std::getline(in, l);) script.push_back(l);
+    script = std::move(*loaded);
+  }
+  if (!opt.measurementsPath.empty()) {
+    Status used = checkNotAnInput(opt.measurementsPath, inputs, "--measurements");
+    if (!used) {
+      std::fprintf(stderr, "scanatlas: error: %s\n", used.message().c_str());
+      return 2;
+    }
   }
   if (!opt.measurementsPath.empty()) {
     s.measureOut = std::fopen(opt.measurementsPath.c_str(), "w");
@@ -557,9 +545,10 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     if (waitFrames > 0) {
       --waitFrames;
     } else if (scriptLine < script.size()) {
-      Status cs = runCommand(s, win, script[scriptLine++], quit, waitFrames);
+      const ScriptCommand& command = script[scriptLine++];
+      Status cs = runCommand(s, win, command, quit, waitFrames);
       if (!cs) {
-        std::fprintf(stderr, "scanatlas: error: %s:%zu: %s\n", opt.scriptPath.c_str(), scriptLine, cs.message().c_str());
+        std::fprintf(stderr, "scanatlas: error: %s:%zu: %s\n", opt.scriptPath.c_str(), command.line, cs.message().c_str());
         rc = 2;
         quit = true;
       }
@@ -584,7 +573,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
       for (int y = 0; y < fbh; ++y)
         std::memcpy(&img.rgba[size_t(y) * fbw * 4], &rows[size_t(fbh - 1 - y) * fbw * 4], size_t(fbw) * 4);
       for (size_t i = 3; i < img.rgba.size(); i += 4) img.rgba[i] = 255;
-      Status ws = writePng(s.pendingWindowShot, img);
+      Status ws = writeImage(s.pendingWindowShot, img);
       s.status = ws ? "saved " + s.pendingWindowShot : ws.message();
       s.pendingWindowShot.clear();
     }
