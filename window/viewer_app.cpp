@@ -383,7 +383,8 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   }
   // The script is read and checked whole before the window opens.
   std::vector<ScriptCommand> script;
-  const std::vector<std::string> inputs = {packPath, opt.scriptPath};
+  std::vector<std::string> inputs = packSources(s.pack);  // the points mode reads them
+  inputs.insert(inputs.end(), {packPath, opt.scriptPath});
   if (!opt.scriptPath.empty()) {
     auto loaded = loadScript(opt.scriptPath, inputs);
     if (!loaded) {

@@ -269,3 +269,52 @@ TEST(Cli, ConvertInfoAndMixedPackOnRealFiles) {
 
 }  // namespace
 }  // namespace sa
+
+namespace sa {
+namespace {
+
+std::string bytesOf(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// A command whose output is one of its inputs (the same file, through a symbolic or a hard link
+// too) refuses with exit 2 and changes nothing; image outputs are PNG or JPEG by extension.
+TEST(Cli, OutputsNeverOverwriteInputs) {
+  test::TempDir d;
+  const std::string scan = d.file("scan.ply");
+  writeIcosphere(scan);
+  const std::string original = bytesOf(scan);
+  std::filesystem::create_symlink(scan, d.file("link.ply"));
+  std::filesystem::create_hard_link(scan, d.file("hard.ply"));
+  EXPECT_EQ(run("pack " + scan + " -o " + scan).code, 2);
+  EXPECT_EQ(run("pack " + scan + " -o " + d.file("link.ply")).code, 2);
+  EXPECT_EQ(run("pack " + d.file("link.ply") + " -o " + d.file("hard.ply")).code, 2);
+  EXPECT_EQ(run("convert " + scan + " -o " + d.file("hard.ply")).code, 2);
+  EXPECT_EQ(bytesOf(scan), original);
+
+  ASSERT_EQ(run("pack " + scan + " -o " + d.file("scan.hfa") + " -q").code, 0);
+  const std::string pack = bytesOf(d.file("scan.hfa"));
+  EXPECT_EQ(run("render " + d.file("scan.hfa") + " -o " + d.file("scan.hfa") + " --size 32x32").code, 2);  // not an image type
+  EXPECT_EQ(run("render " + d.file("scan.hfa") + " -o " + d.file("a.png") + " --depth-out " + d.file("scan.ply") +
+                " --size 32x32").code, 2);
+  // eval and bench read the pack's sources (far measure, points baseline): not an output either.
+  EXPECT_EQ(run("eval " + d.file("scan.hfa") + " --orbit 1 --size 32x32 --csv " + scan).code, 2);
+  EXPECT_EQ(run("eval " + d.file("scan.hfa") + " --orbit 1 --size 32x32 --csv " + d.file("scan.hfa")).code, 2);
+  EXPECT_EQ(run("bench " + d.file("scan.hfa") + " --orbit 1 --size 32x32 --frames 1 --csv " + d.file("link.ply")).code, 2);
+  EXPECT_EQ(bytesOf(scan), original);
+  EXPECT_EQ(bytesOf(d.file("scan.hfa")), pack);
+
+  // Images: .jpg is JPEG, .png is PNG, anything else is refused before rendering.
+  EXPECT_EQ(run("render " + d.file("scan.hfa") + " -o " + d.file("v.bmp") + " --size 32x32").code, 2);
+  EXPECT_FALSE(std::filesystem::exists(d.file("v.bmp")));
+  ASSERT_EQ(run("render " + d.file("scan.hfa") + " -o " + d.file("v.jpg") + " --size 32x32 -q").code, 0);
+  ASSERT_EQ(run("render " + d.file("scan.hfa") + " -o " + d.file("v.png") + " --size 32x32 -q").code, 0);
+  const std::string jpg = bytesOf(d.file("v.jpg")), png = bytesOf(d.file("v.png"));
+  ASSERT_GE(jpg.size(), 3u);
+  EXPECT_EQ(jpg.substr(0, 3), std::string("\xFF\xD8\xFF"));
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+}
+
+}  // namespace
+}  // namespace sa

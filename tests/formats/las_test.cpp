@@ -1,4 +1,6 @@
 #include "formats/las.h"
+#include "formats/source.h"
+#include "preprocess/pipeline.h"
 
 #include <gtest/gtest.h>
 

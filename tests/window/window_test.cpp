@@ -170,6 +170,20 @@ TEST_F(Window, BadPackAndBadScriptGiveClearErrors) {
   EXPECT_EQ(run(view(dir_.file("s.ply") + " --script " + dir_.file("bad.txt")), &out), 2);
   EXPECT_NE(out.find("unknown command"), std::string::npos) << out;
   EXPECT_TRUE(std::ifstream(dir_.file("s.hfa")).good());
+  // The whole script is checked before the window opens: a typo on line 3 stops the session
+  // before line 1's screenshot is taken, and the error names the line.
+  test::writeText(dir_.file("typo.txt"), "screenshot " + dir_.file("first.png") + "\nframe\npick 10\nquit\n");
+  EXPECT_EQ(run(view(dir_.file("s.hfa") + " --script " + dir_.file("typo.txt")), &out), 2);
+  EXPECT_NE(out.find("typo.txt:3:"), std::string::npos) << out;
+  EXPECT_FALSE(std::ifstream(dir_.file("first.png")).good());
+  EXPECT_EQ(out.find("first frame"), std::string::npos) << out;
+  // A script screenshot over the pack is refused, as is an unknown image type.
+  test::writeText(dir_.file("over.txt"), "screenshot " + dir_.file("s.hfa") + "\nquit\n");
+  EXPECT_EQ(run(view(dir_.file("s.hfa") + " --script " + dir_.file("over.txt")), &out), 2);
+  EXPECT_NE(out.find("unknown image type"), std::string::npos) << out;
+  test::writeText(dir_.file("over.txt"), "windowshot " + dir_.file("s.png") + "\nquit\n");
+  EXPECT_EQ(run(view(dir_.file("s.hfa") + " --script " + dir_.file("over.txt") + " --measurements " + dir_.file("s.ply")), &out), 2);
+  EXPECT_NE(out.find("refusing to overwrite"), std::string::npos) << out;
 }
 
 }  // namespace
