@@ -56,6 +56,7 @@ struct PackJob {
   std::vector<std::pair<uint32_t, uint32_t>> sampleCells;   // triangle path: (triangle, cell) of its surface samples
   std::vector<std::pair<uint32_t, uint32_t>> triCells;      // triangle path: (triangle, cell) to rasterize, sorted
   std::vector<double> chunkSpacing;  // per chunk: its sample spacing (ChunkPoint::spacing is relative to it)
+  HeightMoments heights;             // of the input points, for the sign of a terrain's up axis
   double spacingSum = 0, areaSpacingSum = 0;
   uint64_t spacingWeight = 0;
   double texel = 0;
@@ -252,6 +253,8 @@ Status chunkCells(PackJob& job, uint32_t ci) {
   SA_RETURN_IF_ERROR(loadChunk(ch, pts));
   decodePositions(pts, job.qz, pos);
   givenNormals(job, pts, nrm);
+  for (size_t i = 0; i < pts.size(); ++i)
+    if (!(pts[i].flags & kChunkSurfaceSample)) job.heights.add(Eigen::Vector3d(&pos[3 * i]));
   const Spacing spacing = chunkSpacing(pts, pos);
   const double sp = spacing.nearest;
   if (sp > 0) {
@@ -393,7 +396,8 @@ void upPhase(PackJob& job) {
     const double* e = job.cells[i].ext;
     cells[i].area = (e[1] - e[0]) * (e[3] - e[2]);
   }
-  const UpDecision d = decideUp(job.input, job.opt.up, job.bounds.min, job.bounds.max, cells);
+  const UpDecision d = decideUp(job.input, job.opt.up, job.bounds.min, job.bounds.max, cells, job.heights,
+                                job.fileNormals || job.triangles);
   job.sum.up = d.up;
   job.sum.upSource = d.source;
 }

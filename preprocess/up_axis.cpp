@@ -7,9 +7,15 @@
 #include "atlas/pack_format.h"
 
 namespace sa {
+namespace {
+
+// A flat area holding this share of all cells' area, facing along a coordinate axis, is ground.
+constexpr double kGroundShare = 0.3;
+
+}  // namespace
 
 Eigen::Vector3d dominantFlatNormal(const std::vector<UpCell>& cells, const Eigen::Vector3d& near, double maxAngleDeg,
-                                   double minShare) {
+                                   double minShare, double* share) {
   const double cosNear = std::cos(maxAngleDeg * M_PI / 180), cosGroup = std::cos(15 * M_PI / 180);
   std::vector<UpCell> cand;
   double total = 0;
@@ -41,11 +47,20 @@ Eigen::Vector3d dominantFlatNormal(const std::vector<UpCell>& cells, const Eigen
       best = sum.normalized();
     }
   }
+  if (share) *share = bestArea / total;
   return bestArea >= minShare * total ? best : Eigen::Vector3d::Zero();
 }
 
+double HeightMoments::skew(int a) const {
+  if (count < 3) return 0;
+  const double m = sum[a] / count, m2 = sum2[a] / count - m * m;
+  const double m3 = sum3[a] / count - 3 * m * sum2[a] / count + 2 * m * m * m;
+  return m2 > 0 ? m3 / std::pow(m2, 1.5) : 0;
+}
+
 UpDecision decideUp(const InputSet& input, const Eigen::Vector3d& given, const Eigen::Vector3d& lo,
-                    const Eigen::Vector3d& hi, const std::vector<UpCell>& cells) {
+                    const Eigen::Vector3d& hi, const std::vector<UpCell>& cells, const HeightMoments& moments,
+                    bool reliableNormals) {
   UpDecision d;
   if (given.norm() > 0) {
     d.up = given.normalized();
@@ -76,18 +91,41 @@ UpDecision decideUp(const InputSet& input, const Eigen::Vector3d& given, const E
     return d;
   }
   // Terrain-like extents (one side under a fifth of the next): the thin axis, on the side most
-  // of the surface faces.
+  // of the surface faces (reliable normals) or its heights skew to.
   const Eigen::Vector3d ext = hi - lo;
   int axes[3] = {0, 1, 2};
   std::sort(axes, axes + 3, [&](int a, int b) { return ext[a] < ext[b]; });
   if (ext[axes[0]] < 0.2 * ext[axes[1]]) {
     Eigen::Vector3d axis = Eigen::Vector3d::Unit(axes[0]);
     double facing = 0;
-    for (const UpCell& c : cells) facing += c.area * c.w.dot(axis);
+    if (reliableNormals)
+      for (const UpCell& c : cells) facing += c.area * c.w.dot(axis);
+    else if (std::abs(moments.skew(axes[0])) > 0.1)
+      facing = moments.skew(axes[0]);
+    else
+      facing = 1;  // no sign in the data: the axis as it points
     d.up = facing < 0 ? Eigen::Vector3d(-axis) : axis;
     d.source = kUpFromData;
     return d;
   }
+  // A large flat area facing along a coordinate axis (the ground of a terrestrial scan): that axis.
+  double bestShare = 0;
+  for (int a = 0; a < 3; ++a) {
+    double share = 0;
+    const Eigen::Vector3d axis = Eigen::Vector3d::Unit(a);
+    const Eigen::Vector3d flat = dominantFlatNormal(cells, axis, 20, kGroundShare, &share);
+    if (flat.norm() > 0 && share > bestShare) {
+      bestShare = share;
+      double facing = 0;
+      if (reliableNormals)
+        for (const UpCell& c : cells) facing += c.area * c.w.dot(axis);
+      else
+        facing = std::abs(moments.skew(a)) > 0.1 ? moments.skew(a) : 1;
+      d.up = facing < 0 ? Eigen::Vector3d(-axis) : axis;
+      d.source = kUpFromData;
+    }
+  }
+  if (bestShare > 0) return d;
   d.up = weak.norm() > 0 ? Eigen::Vector3d(weak.normalized()) : Eigen::Vector3d::UnitY();
   d.source = weak.norm() > 0 ? kUpConvention : kUpUnknown;
   return d;

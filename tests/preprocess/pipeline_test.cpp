@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <sstream>
 
 #include "../common/test_util.h"
 #include "atlas/pack_file.h"
@@ -283,6 +284,104 @@ TEST(PipelineReal, AutzenLasPacksAsTerrainWithColourAndLayers) {
       if (overlapXY && a.lo.z() > b.hi.z() + 10) ++pairs;
     }
   EXPECT_GE(pairs, 10u) << "no cells over cells: layered structure was not split";
+}
+
+}  // namespace
+}  // namespace sa
+
+namespace sa {
+namespace {
+
+// Packs `text` written as a .xyz file (or a PLY when ext says so); returns the reader's meta.
+PackMeta packText(const test::TempDir& d, const std::string& name, const std::string& text, PackSummary* sum = nullptr,
+                  const PackOptions& opt = {}) {
+  test::writeText(d.file(name), text);
+  auto in = InputSet::open({d.file(name)});
+  EXPECT_TRUE(in.isOk()) << (in.isOk() ? "" : in.status().message());
+  PackSummary s;
+  EXPECT_TRUE(packInput(*in, d.file(name + ".hfa"), opt, nullptr, s).isOk());
+  if (sum) *sum = s;
+  PackReader r;
+  EXPECT_TRUE(r.open(d.file(name + ".hfa")).isOk());
+  return r.meta();
+}
+
+// A terrain-like cloud (wide in x and y, thin in z) as a plain .xyz file: no format convention
+// to lean on, so up comes from the data - the thin axis, on the side the surface faces.
+std::string terrainXyz(double lengthX, double lengthY, int n, double zScale) {
+  std::string s;
+  uint32_t seed = 17;
+  auto rnd = [&] { return (seed = seed * 1664525u + 1013904223u) / 4294967296.0; };
+  for (int i = 0; i < n; ++i) {
+    const double x = rnd() * lengthX, y = rnd() * lengthY;
+    const double z = zScale * std::sin(2 * M_PI * x / 50) * std::sin(2 * M_PI * y / 50);  // no skew
+    s += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(z) + "\n";
+  }
+  return s;
+}
+
+TEST(UpAxis, FromGivenConventionAndData) {
+  test::TempDir d;
+  // Terrain in an .xyz file: the z axis from the data (the heights do not skew: as it points).
+  PackMeta m = packText(d, "terrain.xyz", terrainXyz(200, 150, 20000, 2.0));
+  EXPECT_EQ(m.upSource, uint32_t(kUpFromData));
+  EXPECT_NEAR(m.up[2], 1.0, 1e-9);
+  // Things stand up from the ground: with posts sticking up, heights skew to +z; the same
+  // terrain upside down (z negated) skews to -z, so up is -z.
+  std::string posts = terrainXyz(200, 150, 20000, 2.0), flipped;
+  for (int i = 0; i < 2000; ++i)
+    posts += std::to_string(20 + 40 * (i % 5)) + " " + std::to_string(20 + 25 * (i / 400)) + " " + std::to_string(0.025 * (i % 400)) + "\n";
+  {
+    std::istringstream in(posts);
+    double x, y, z;
+    while (in >> x >> y >> z) flipped += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(-z) + "\n";
+  }
+  m = packText(d, "posts.xyz", posts);
+  EXPECT_NEAR(m.up[2], 1.0, 1e-9);
+  m = packText(d, "flipped.xyz", flipped);
+  EXPECT_NEAR(m.up[2], -1.0, 1e-9);
+  // Given: stored as given.
+  PackOptions given;
+  given.up = Eigen::Vector3d(0, 0, -1);
+  m = packText(d, "given.xyz", terrainXyz(200, 150, 2000, 2.0), nullptr, given);
+  EXPECT_EQ(m.upSource, uint32_t(kUpGiven));
+  EXPECT_NEAR(m.up[2], -1.0, 1e-12);
+  // A compact object in a PLY: the format's usual +y.
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(4000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  test::writePointsPly(d.file("ball.ply"), pts, &nrm);
+  auto in = InputSet::open({d.file("ball.ply")});
+  ASSERT_TRUE(in.isOk());
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, d.file("ball.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_EQ(sum.upSource, uint32_t(kUpConvention));
+  EXPECT_NEAR(sum.up.y(), 1.0, 1e-12);
+}
+
+// A Kinect-style organized PCD is a camera's image, y down: up starts from -y and becomes the
+// normal of the largest flat area near it (the table top / floor of PCL's mug scene).
+TEST(UpAxisReal, OrganizedPcdStandsOnItsTable) {
+  auto in = InputSet::open({test::sharedData("pcd/table_scene_mug_stereo_textured.pcd")});
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  test::TempDir d;
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, d.file("t.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_EQ(sum.upSource, uint32_t(kUpFromData));
+  EXPECT_GT(sum.up.dot(-Eigen::Vector3d::UnitY()), std::cos(45 * M_PI / 180)) << sum.up.transpose();
+  EXPECT_LT(sum.up.dot(-Eigen::Vector3d::UnitY()), 0.999) << "not refined: " << sum.up.transpose();
+}
+
+// A sparse strip: 501 m x 5 m, 1000 points. It made a 2048^2 page (8 MB); pages now fit their
+// tiles and a point input keeps at most 8 texels per point.
+TEST(Pipeline, SparseStripStaysSmall) {
+  test::TempDir d;
+  PackSummary sum;
+  const PackMeta m = packText(d, "strip.xyz", terrainXyz(501, 5, 1000, 0.3), &sum);
+  std::printf("strip: %u page(s) of %ux%u, %llu texels, %llu bytes (%.1f per point)\n", m.pageCount, m.pageWidth,
+              m.pageHeight, (unsigned long long)m.texelsUsed, (unsigned long long)sum.fileBytes, sum.fileBytes / 1000.0);
+  EXPECT_LE(m.texelsUsed, 8u * 1000u);
+  EXPECT_LE(uint64_t(m.pageWidth) * m.pageHeight * m.pageCount, 4u * m.texelsUsed);
+  EXPECT_LT(sum.fileBytes, 200u * 1000u);
 }
 
 }  // namespace
