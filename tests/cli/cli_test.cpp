@@ -120,6 +120,43 @@ TEST(Cli, PackInfoBenchEvalJson) {
   // Shading normals come from the height gradient, the reference uses flat facet normals.
   EXPECT_GE(par["psnr"].get<double>(), 27.0);
   EXPECT_TRUE(ej["configs"][1]["normal_median_deg"].is_null());  // points: no normals
+  EXPECT_EQ(par["interior_holes"].get<int>(), 0);
+  EXPECT_TRUE(par["far"].is_null());  // only with --far (or without a reference)
+
+  // The reference in every mesh format pack reads: the same mesh as OBJ and as Draco gives the
+  // same figures; --far adds the reference-free measure; without --reference it is the measure.
+  {
+    std::ifstream in(d.file("ico.ply"));
+    std::ofstream obj(d.file("ico.obj"));
+    obj.precision(17);
+    std::string line;
+    size_t nv = 0, nf = 0;
+    while (std::getline(in, line) && line != "end_header") {
+      if (line.rfind("element vertex", 0) == 0) nv = std::stoul(line.substr(15));
+      if (line.rfind("element face", 0) == 0) nf = std::stoul(line.substr(13));
+    }
+    for (size_t i = 0; i < nv && std::getline(in, line); ++i) obj << "v " << line << "\n";
+    for (size_t i = 0; i < nf && std::getline(in, line); ++i) {
+      std::istringstream f(line);
+      int k, a, b, c;
+      f >> k >> a >> b >> c;
+      obj << "f " << a + 1 << " " << b + 1 << " " << c + 1 << "\n";
+    }
+  }
+  ASSERT_EQ(run("convert " + d.file("ico.ply") + " -o " + d.file("ico.drc") + " --quantization 0 -q").code, 0);
+  for (const char* ref : {"ico.obj", "ico.drc"}) {
+    CmdResult r = run("eval " + d.file("ico.hfa") + " --reference " + d.file(ref) + " --orbit 3 --size 96x96 --far --json");
+    ASSERT_EQ(r.code, 0) << ref << r.out;
+    const auto c = nlohmann::json::parse(r.out)["configs"][0];
+    EXPECT_NEAR(c["iou"].get<double>(), par["iou"].get<double>(), 1e-9) << ref;
+    EXPECT_NEAR(c["depth_median"].get<double>(), par["depth_median"].get<double>(), 1e-9) << ref;
+    EXPECT_FALSE(c["far"].is_null());
+    EXPECT_LE(c["far"]["beyond3"].get<double>(), 0.001) << ref;
+  }
+  auto fj = nlohmann::json::parse(run("eval " + d.file("ico.hfa") + " --orbit 2 --size 64x64 --json").out);
+  EXPECT_TRUE(fj["reference"].is_null());
+  EXPECT_GT(fj["configs"][0]["far"]["pixels"].get<int>(), 500);
+  EXPECT_EQ(fj["configs"][0]["per_view"].size(), 2u);
 }
 
 }  // namespace
