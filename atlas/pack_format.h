@@ -98,28 +98,38 @@ inline double decodeHeight(uint16_t k, double wMin, double wMax) {
   return wMin + (static_cast<double>(k) - 1.0) / 65534.0 * (wMax - wMin);
 }
 
-// Normal encoding (FORMAT.md): hemi-octahedral, in the cell frame, two bytes.
-inline void encodeNormal(double nu, double nv, double nw, uint8_t out[2]) {
-  if (nw < 0) nw = 0;
-  double s = (nu < 0 ? -nu : nu) + (nv < 0 ? -nv : nv) + nw;
-  double pu = 0, pv = 0;
+// Normal encoding (FORMAT.md): octahedral, world space, two bytes. In world space the same
+// normal gets the same bytes in every cell, so neighbouring cells' shading agrees exactly.
+inline void encodeNormal(double x, double y, double z, uint8_t out[2]) {
+  const double s = std::abs(x) + std::abs(y) + std::abs(z);
+  double px = 0, py = 0;
   if (s > 0) {
-    pu = nu / s;
-    pv = nv / s;
+    px = x / s;
+    py = y / s;
+    if (z < 0) {  // the lower half folds over the square's corners
+      const double fx = (1 - std::abs(py)) * (px < 0 ? -1 : 1), fy = (1 - std::abs(px)) * (py < 0 ? -1 : 1);
+      px = fx;
+      py = fy;
+    }
+  } else {
+    px = py = 0;  // unknown: +z
   }
-  const double e0 = (pu + pv) * 127.5 + 127.5, e1 = (pu - pv) * 127.5 + 127.5;
+  const double e0 = px * 127.5 + 127.5, e1 = py * 127.5 + 127.5;
   out[0] = static_cast<uint8_t>(e0 < 0 ? 0 : (e0 > 255 ? 255 : e0 + 0.5));
   out[1] = static_cast<uint8_t>(e1 < 0 ? 0 : (e1 > 255 ? 255 : e1 + 0.5));
 }
-// Writes the unit normal (frame components) of an encoded texel.
+// Writes the unit world normal of an encoded texel.
 inline void decodeNormal(const uint8_t in[2], double n[3]) {
-  const double e0 = in[0] / 127.5 - 1, e1 = in[1] / 127.5 - 1;
-  const double tu = (e0 + e1) / 2, tv = (e0 - e1) / 2;
-  n[0] = tu;
-  n[1] = tv;
-  n[2] = 1 - (tu < 0 ? -tu : tu) - (tv < 0 ? -tv : tv);
-  const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-  for (int a = 0; a < 3; ++a) n[a] /= len;
+  const double px = in[0] / 127.5 - 1, py = in[1] / 127.5 - 1;
+  double z = 1 - std::abs(px) - std::abs(py), x = px, y = py;
+  if (z < 0) {
+    x = (1 - std::abs(py)) * (px < 0 ? -1 : 1);
+    y = (1 - std::abs(px)) * (py < 0 ? -1 : 1);
+  }
+  const double len = std::sqrt(x * x + y * y + z * z);
+  n[0] = x / len;
+  n[1] = y / len;
+  n[2] = z / len;
 }
 
 }  // namespace sa

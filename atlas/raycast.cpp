@@ -37,8 +37,10 @@ double CpuRaycaster::height(const CellRecord& c, double u, double v) const {
     const int nj = std::clamp(int(std::floor(fy + 0.5)), 0, int(c.tileH) - 1);
     const double hn = texelHeight(c, ni, nj);
     if (std::isnan(hn) || !pack_.hasNormals()) return hn;
-    double n[3];
-    decodeNormal(pack_.normalTexel(c, ni, nj), n);
+    double w[3];
+    decodeNormal(pack_.normalTexel(c, ni, nj), w);  // world: into the cell's frame
+    const double n[3] = {w[0] * c.u[0] + w[1] * c.u[1] + w[2] * c.u[2], w[0] * c.v[0] + w[1] * c.v[1] + w[2] * c.v[2],
+                         w[0] * c.w[0] + w[1] * c.w[1] + w[2] * c.w[2]};
     const double gu = -n[0] / std::max(n[2], 0.05), gv = -n[1] / std::max(n[2], 0.05);
     const double tu = (c.box[1] - c.box[0]) / c.tileW, tv = (c.box[3] - c.box[2]) / c.tileH;
     for (int k = 0; k < 4; ++k)

@@ -38,6 +38,10 @@ const char* kHelp =
     "  where the reference has surface on the pixel and its 8 neighbours and the render has\n"
     "  none: pinholes and seams), and the frame time.\n"
     "\n"
+    "  always (parallax): seam, the mean angle between the shading normals of neighbouring pixels\n"
+    "  drawn by different cells over the same for pixels of one cell (on continuous surface; 1 =\n"
+    "  cell borders are invisible in the shading).\n"
+    "\n"
     "  reference-free (--far, and always when no --reference is given): for every rendered\n"
     "  surface pixel, the 3-D distance from its hit point to the nearest input point (a kd-tree\n"
     "  over the pack's source files), in units of the pack's sample spacing: median, p99 and the\n"
@@ -81,6 +85,7 @@ struct ViewResult {
   double ms = 0;
   std::optional<ViewMetrics> ref;
   std::optional<FarStats> far;
+  std::optional<SeamStats> seam;  // parallax: normals across cell borders vs within cells
 };
 
 struct Row {
@@ -91,6 +96,7 @@ struct Row {
   double iou = 0, iouMin = 1, sil = 0, depthMed = 0, depthP95 = 0, normalMed = -1, psnr = 0;
   size_t holes = 0;
   std::optional<FarStats> far;
+  std::optional<SeamStats> seam;
   std::vector<ViewResult> views;
 };
 
@@ -162,12 +168,22 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
   const Eigen::Vector3d origin(pack.meta().origin);
   std::vector<double> depthAll, normalAll, farAll;
   double psnrSum = 0, iouSum = 0, silSum = 0;
+  std::optional<SeamStats> seamAll;
   for (size_t v = 0; v < o.cams.size(); ++v) {
     FrameResult fr;
-    const unsigned want = kReadColor | kReadDepth | (rs.mode == RenderMode::kParallax ? kReadNormals : 0u);
+    const bool parallax = rs.mode == RenderMode::kParallax;
+    const unsigned want = kReadColor | kReadDepth | (parallax ? kReadNormals | kReadCells : 0u);
     SA_RETURN_IF_ERROR(renderer.render(o.cams[v], rs, fr, want));
     ViewResult vr;
     vr.ms = ms[v];
+    if (parallax) {
+      vr.seam = seamStats(o.cams[v], fr.depth, fr.normals, fr.cells);
+      if (!seamAll) seamAll = SeamStats{};
+      seamAll->borderMeanDeg += vr.seam->borderMeanDeg * double(vr.seam->borderPairs);
+      seamAll->insideMeanDeg += vr.seam->insideMeanDeg * double(vr.seam->insidePairs);
+      seamAll->borderPairs += vr.seam->borderPairs;
+      seamAll->insidePairs += vr.seam->insidePairs;
+    }
     if (ref) {
       vr.ref = evaluateView(fr.color, fr.depth, fr.normals, ref->views[v], ref->shaded[v], ref->diag);
       depthAll.insert(depthAll.end(), vr.ref->depthErrors.begin(), vr.ref->depthErrors.end());
@@ -202,6 +218,11 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
     row.normalMed = normalAll.empty() ? -1 : percentile(normalAll, 0.5);
   }
   if (samples) row.far = summarizeFar(farAll);
+  if (seamAll) {
+    seamAll->borderMeanDeg /= double(std::max<size_t>(1, seamAll->borderPairs));
+    seamAll->insideMeanDeg /= double(std::max<size_t>(1, seamAll->insidePairs));
+    row.seam = seamAll;
+  }
   return Status::ok();
 }
 
@@ -217,6 +238,9 @@ void printFigures(const char* label, double ms, const Row* sum, const ViewResult
     std::fprintf(stderr, " %8.4f %8s %7.3f %11.5f %11.4f %9s %7.2f %7zu", view->ref->iou, "", view->ref->silhouetteError,
                  100 * view->ref->depthMedian, 100 * view->ref->depthP95, fmtNormal(view->ref->normalMedianDeg).c_str(),
                  view->ref->psnr, view->ref->interiorHoles);
+  const std::optional<SeamStats>& seam = sum ? sum->seam : view->seam;
+  if (seam) std::fprintf(stderr, " %6.2f", seam->ratio());
+  else std::fprintf(stderr, " %6s", "-");
   const std::optional<FarStats>& far = sum ? sum->far : view->far;
   if (far)
     std::fprintf(stderr, " %8.3f %8.3f %9.4f %9.4f", far->median, far->p99, 100 * far->beyond3, 100 * far->beyond10);
@@ -228,6 +252,7 @@ void printHeader(const char* first, bool ref, bool far) {
   if (ref)
     std::fprintf(stderr, " %8s %8s %7s %11s %11s %9s %7s %7s", "IoU", "IoU min", "silh.", "depth med%", "depth p95%",
                  "normal°", "PSNR dB", "holes");
+  std::fprintf(stderr, " %6s", "seam");
   if (far) std::fprintf(stderr, " %8s %8s %9s %9s", "far med", "far p99", ">3 sp %", ">10 sp %");
   std::fprintf(stderr, "\n");
 }
@@ -247,7 +272,17 @@ void printTables(const std::vector<Row>& rows) {
   std::fprintf(stderr, "\n");
   printHeader("configuration (all views)", ref, far);
   for (const Row& r : rows) printFigures(configLabel(r).c_str(), r.frameMs, &r, nullptr);
+  std::fprintf(stderr, "seam: mean angle between shading normals of neighbouring pixels from different cells over the same "
+                       "within a cell (1 = no seams)\n");
   if (far) std::fprintf(stderr, "far: distance from each rendered surface pixel to the nearest input point, in sample spacings\n");
+}
+
+std::string seamJson(const std::optional<SeamStats>& s) {
+  if (!s) return "null";
+  char buf[256];
+  std::snprintf(buf, sizeof(buf), "{\"ratio\": %.6g, \"border_mean_deg\": %.6g, \"inside_mean_deg\": %.6g, \"border_pairs\": %zu, "
+                "\"inside_pairs\": %zu}", s->ratio(), s->borderMeanDeg, s->insideMeanDeg, s->borderPairs, s->insidePairs);
+  return buf;
 }
 
 std::string farJson(const std::optional<FarStats>& f) {
@@ -274,7 +309,7 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
                   "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f, \"interior_holes\": %zu",
                   r.iou, r.iouMin, r.sil, r.depthMed, r.depthP95,
                   r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr, r.holes);
-    std::printf(", \"far\": %s, \"per_view\": [", farJson(r.far).c_str());
+    std::printf(", \"far\": %s, \"seam\": %s, \"per_view\": [", farJson(r.far).c_str(), seamJson(r.seam).c_str());
     for (size_t v = 0; v < r.views.size(); ++v) {
       const ViewResult& vr = r.views[v];
       std::printf("%s{\"view\": %zu, \"frame_ms\": %.4f", v ? ", " : "", v, vr.ms);
@@ -284,7 +319,7 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
                     vr.ref->iou, vr.ref->depthMedian, vr.ref->depthP95,
                     vr.ref->normalMedianDeg < 0 ? "null" : std::to_string(vr.ref->normalMedianDeg).c_str(),
                     vr.ref->interiorHoles);
-      std::printf(", \"far\": %s}", farJson(vr.far).c_str());
+      std::printf(", \"far\": %s, \"seam\": %s}", farJson(vr.far).c_str(), seamJson(vr.seam).c_str());
     }
     std::printf("]}");
   }

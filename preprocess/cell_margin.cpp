@@ -48,4 +48,29 @@ void MarginFinder::find(const Cell& c, double radius, double minCos, std::vector
   out.erase(std::unique(out.begin() + long(before), out.end()), out.end());
 }
 
+void MarginFinder::normalField(const double* xyz, const float* hints, size_t m, double radius, float* out) const {
+  std::copy(hints, hints + 3 * m, out);
+  if (!index_ || m == 0) return;
+  std::vector<std::vector<int>> ind;
+  std::vector<std::vector<double>> dist;
+  flann::Matrix<double> mq(const_cast<double*>(xyz), m, 3);
+  index_->tree.radiusSearch(mq, ind, dist, float(radius * radius), flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
+  const double r2 = radius * radius;
+  for (size_t i = 0; i < m; ++i) {
+    const Eigen::Vector3d hint(hints[3 * i], hints[3 * i + 1], hints[3 * i + 2]);
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < ind[i].size(); ++k) {
+      const float* n = &nrm_[3 * size_t(ind[i][k])];
+      const Eigen::Vector3d nn(n[0], n[1], n[2]);
+      if (!(nn.dot(hint) > 0.5)) continue;
+      const double q = 1 - dist[i][k] / r2;
+      if (q > 0) sum += q * q * nn;
+    }
+    if (sum.norm() > 0) {
+      sum.normalize();
+      for (int a = 0; a < 3; ++a) out[3 * i + a] = float(sum[a]);
+    }
+  }
+}
+
 }  // namespace sa

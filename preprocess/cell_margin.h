@@ -27,6 +27,13 @@ class MarginFinder {
   // `radius` in u and v, facing its +W side (normal . w > minCos); appended to `out`.
   void find(const Cell& c, double radius, double minCos, std::vector<uint32_t>& out) const;
 
+  // The smooth normal field of the chunk's points at each of the m points xyz: their normals
+  // averaged with weights (1 - (d/radius)^2)^2 over every point within `radius` (3-D) whose
+  // normal agrees with hints[i] (dot > 0.5). A function of position only: two cells asking at
+  // the same place get the same normal, so shading is continuous across their border. Where no
+  // point is near, out[i] = hints[i].
+  void normalField(const double* xyz, const float* hints, size_t m, double radius, float* out) const;
+
  private:
   struct Index;
   const double* pos_;

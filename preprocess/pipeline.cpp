@@ -509,6 +509,34 @@ void triangleTile(const PackJob& job, const std::vector<uint32_t>* tris, CellRec
   rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * job.texel, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), true, tile);
 }
 
+// The tile's stored normals from the chunk's normal field (MarginFinder::normalField) at each
+// covered texel's surface point: neighbouring cells then store the same normal where their
+// tiles overlap. Splatted from the tile's own samples, a cell's normals near its border would
+// average a one-sided neighbourhood, several degrees off its neighbour's on a curved surface.
+constexpr double kFieldScale = 1.5;  // the field's radius over the splat radius  // the field's radius over the splat radius  // the field's radius over the splat radius  // the field's radius over the splat radius
+
+void fieldNormals(const CellRecord& r, const TileGrid& g, const MarginFinder& margins, double radius, TileOutput& tile) {
+  const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
+  std::vector<size_t> texels;
+  std::vector<double> xyz;
+  std::vector<float> hints;
+  for (size_t t = 0; t < tile.heights.size(); ++t) {
+    if (!tile.heights[t]) continue;
+    const int i = static_cast<int>(t % size_t(g.width)), j = static_cast<int>(t / size_t(g.width));
+    const double h = decodeHeight(tile.heights[t], tile.wMin, tile.wMax);
+    const Eigen::Vector3d x = O + U * (g.u0 + (i + 0.5) * g.du) + V * (g.v0 + (j + 0.5) * g.dv) + Wn * h;
+    double n[3];
+    decodeNormal(&tile.normals[2 * t], n);
+    texels.push_back(t);
+    xyz.insert(xyz.end(), {x.x(), x.y(), x.z()});
+    hints.insert(hints.end(), {float(n[0]), float(n[1]), float(n[2])});
+  }
+  std::vector<float> field(hints.size());
+  margins.normalField(xyz.data(), hints.data(), texels.size(), radius, field.data());
+  for (size_t k = 0; k < texels.size(); ++k)
+    encodeNormal(field[3 * k], field[3 * k + 1], field[3 * k + 2], &tile.normals[2 * texels[k]]);
+}
+
 // One cell's tile from its points (in the rewritten chunk: smoothed, with normals) and the
 // neighbouring cells' points in its margin (preprocess/cell_margin.h).
 void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::vector<ChunkPoint>& pts,
@@ -563,6 +591,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::
   r.box[4] = tile.wMin;
   r.box[5] = tile.wMax;
   writer.setCellHeights(id, tile.wMin, tile.wMax);
+  fieldNormals(r, g, margins, job.opt.splatRadius * job.sum.spacing * kFieldScale, tile);
 }
 
 // ---- pass B, one chunk: every cell's tile ----
@@ -593,6 +622,11 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
       g.dv = (r.box[3] - r.box[2]) / r.tileH;
       g.wMin = r.box[4];
       g.wMax = r.box[5];
+      for (int a = 0; a < 3; ++a) {
+        g.frame[a] = r.u[a];
+        g.frame[3 + a] = r.v[a];
+        g.frame[6 + a] = r.w[a];
+      }
       if (job.triangles) {
         auto it = cellTris.find(id);
         triangleTile(job, it == cellTris.end() ? nullptr : &it->second, r, writer, id, g, tile);

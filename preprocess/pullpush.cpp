@@ -289,8 +289,10 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
       out.rgba[4 * t + 3] = 255;
     }
     if (ch.normal >= 0) {
-      const float* n = a + ch.normal;
-      encodeNormal(n[0], n[1], std::max(n[2], 0.f), &out.normals[2 * t]);
+      const double f[3] = {a[ch.normal], a[ch.normal + 1], a[ch.normal + 2]};
+      double w[3];
+      g.toWorld(f, w);
+      encodeNormal(w[0], w[1], w[2], &out.normals[2 * t]);
     }
   }
 }
@@ -353,7 +355,9 @@ void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, 
       const double* p = tris + 9 * size_t(winner[t]);
       const Eigen::Vector3d a(p[0], p[1], p[2]), b(p[3], p[4], p[5]), c(p[6], p[7], p[8]);
       const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
-      encodeNormal(n.x(), n.y(), n.z(), &out.normals[2 * t]);
+      double w[3];
+      g.toWorld(n.data(), w);
+      encodeNormal(w[0], w[1], w[2], &out.normals[2 * t]);
     }
   }
 }

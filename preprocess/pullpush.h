@@ -15,12 +15,18 @@ struct TileGrid {
   int width = 1, height = 1;
   double u0 = 0, v0 = 0, du = 1, dv = 1;
   double wMin = 0, wMax = 1;
+  // The cell's axes U, V, W in world coordinates (rows): output normals are stored in world
+  // coordinates (FORMAT.md).
+  double frame[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  void toWorld(const double f[3], double w[3]) const {
+    for (int a = 0; a < 3; ++a) w[a] = f[0] * frame[a] + f[1] * frame[3 + a] + f[2] * frame[6 + a];
+  }
 };
 
 struct TileOutput {
   std::vector<uint16_t> heights;  // width * height; 0 = not covered
   double wMin = 0, wMax = 0;      // the height range the heights encode
-  std::vector<uint8_t> normals;   // width * height * 2 (encodeNormal, frame components) when normals were given
+  std::vector<uint8_t> normals;   // width * height * 2 (encodeNormal, world) when normals were given
   std::vector<uint8_t> rgba;      // width * height * 4 when colours were given
   size_t covered = 0;
 };

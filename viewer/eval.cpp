@@ -81,4 +81,36 @@ std::vector<double> surfacePoints(const Camera& cam, const std::vector<float>& d
   return out;
 }
 
+SeamStats seamStats(const Camera& cam, const std::vector<float>& depth, const std::vector<float>& normals,
+                    const std::vector<uint32_t>& cells) {
+  SeamStats st;
+  const int W = cam.width, H = cam.height;
+  const double footprint = 2 * std::tan(cam.fovDeg * M_PI / 360.0) / H;  // pixel size per unit of depth
+  double border = 0, inside = 0;
+  auto pair = [&](size_t a, size_t b) {
+    if (!cells[a] || !cells[b] || !std::isfinite(depth[a]) || !std::isfinite(depth[b])) return;
+    if (std::abs(double(depth[a]) - depth[b]) > 6 * footprint * std::min(depth[a], depth[b])) return;
+    const Eigen::Vector3d na(normals[3 * a], normals[3 * a + 1], normals[3 * a + 2]);
+    const Eigen::Vector3d nb(normals[3 * b], normals[3 * b + 1], normals[3 * b + 2]);
+    if (!(na.norm() > 0.5 && nb.norm() > 0.5)) return;
+    const double deg = std::acos(std::clamp(na.normalized().dot(nb.normalized()), -1.0, 1.0)) * 180 / M_PI;
+    if (cells[a] != cells[b]) {
+      border += deg;
+      ++st.borderPairs;
+    } else {
+      inside += deg;
+      ++st.insidePairs;
+    }
+  };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const size_t i = size_t(y) * W + x;
+      if (x + 1 < W) pair(i, i + 1);
+      if (y + 1 < H) pair(i, i + W);
+    }
+  st.borderMeanDeg = st.borderPairs ? border / double(st.borderPairs) : 0;
+  st.insideMeanDeg = st.insidePairs ? inside / double(st.insidePairs) : 0;
+  return st;
+}
+
 }  // namespace sa

@@ -29,6 +29,18 @@ ViewMetrics evaluateView(const Image& testColor, const std::vector<float>& testD
 
 double percentile(std::vector<double> v, double q);
 
+// Shading continuity across cell borders: the mean angle between the shading normals of
+// neighbouring pixels (right and down) drawn by different cells, against the same for
+// neighbouring pixels of one cell. Only pairs on one continuous surface count: both hit, depths
+// within a few pixel footprints (no silhouettes or occlusion edges).
+struct SeamStats {
+  double borderMeanDeg = 0, insideMeanDeg = 0;
+  size_t borderPairs = 0, insidePairs = 0;
+  double ratio() const { return insideMeanDeg > 0 ? borderMeanDeg / insideMeanDeg : 0; }
+};
+SeamStats seamStats(const Camera& cam, const std::vector<float>& depth, const std::vector<float>& normals,
+                    const std::vector<uint32_t>& cells);
+
 // The hit point of every pixel with finite linear depth (row 0 at the top), relative to
 // `origin`, xyz interleaved, formed in double from the camera.
 std::vector<double> surfacePoints(const Camera& cam, const std::vector<float>& depth, const Eigen::Vector3d& origin);

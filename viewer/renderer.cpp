@@ -120,11 +120,11 @@ struct Renderer::Gl {
     glDeleteFramebuffers(2, fbos);
     GLuint tex[] = {colorTex, linearTex, postTex};
     glDeleteTextures(3, tex);
-    GLuint rb[] = {depthRb, normalRb};
-    glDeleteRenderbuffers(2, rb);
-    fbo = postFbo = colorTex = linearTex = postTex = depthRb = normalRb = 0;
+    GLuint rb[] = {depthRb, normalRb, cellRb};
+    glDeleteRenderbuffers(3, rb);
+    fbo = postFbo = colorTex = linearTex = postTex = depthRb = normalRb = cellRb = 0;
   }
-  GLuint fbo = 0, colorTex = 0, linearTex = 0, depthRb = 0, normalRb = 0;
+  GLuint fbo = 0, colorTex = 0, linearTex = 0, depthRb = 0, normalRb = 0, cellRb = 0;
   GLuint postFbo = 0, postTex = 0;
   bool lastWasPost = false;
   GLuint timeQuery = 0, fragQuery = 0;
@@ -298,117 +298,119 @@ Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint
   return Status::ok();
 }
 
-Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult& out, unsigned readBack) {
-  SA_RETURN_IF_ERROR(cam.validate());
-  if (s.mode == RenderMode::kPoints && !hasPoints())
-    return Status::badInput("points mode: no source points loaded for this pack");
+// Render targets at the camera's size: colour, linear depth, normals, cell ids, depth buffer,
+// and the post-processing target.
+Status Renderer::ensureTargets(int width, int height) {
   Gl& g = *gl_;
-  if (g.fbW != cam.width || g.fbH != cam.height) {
-    g.releaseTargets();
-    auto texture = [&](GLenum format) {
-      GLuint t = 0;
-      glCreateTextures(GL_TEXTURE_2D, 1, &t);
-      glTextureStorage2D(t, 1, format, cam.width, cam.height);
-      glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-      glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-      glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-      glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-      return t;
-    };
-    g.colorTex = texture(GL_RGBA8);
-    g.linearTex = texture(GL_R32F);
-    g.postTex = texture(GL_RGBA8);
-    glCreateRenderbuffers(1, &g.depthRb);
-    glCreateRenderbuffers(1, &g.normalRb);
-    glNamedRenderbufferStorage(g.normalRb, GL_RGBA16F, cam.width, cam.height);
-    glNamedRenderbufferStorage(g.depthRb, GL_DEPTH_COMPONENT32F, cam.width, cam.height);
-    glCreateFramebuffers(1, &g.fbo);
-    glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT0, g.colorTex, 0);
-    glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT1, g.linearTex, 0);
-    glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT2, GL_RENDERBUFFER, g.normalRb);
-    glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
-    glCreateFramebuffers(1, &g.postFbo);
-    glNamedFramebufferTexture(g.postFbo, GL_COLOR_ATTACHMENT0, g.postTex, 0);
-    if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE ||
-        glCheckNamedFramebufferStatus(g.postFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
-      return Status::internal("framebuffer incomplete at " + std::to_string(cam.width) + "x" + std::to_string(cam.height));
-    g.fbW = cam.width;
-    g.fbH = cam.height;
-  }
-  // The normal attachment is written only when asked for (eval), so bench frames do not pay.
-  const GLenum bufs[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1,
-                         (readBack & kReadNormals) ? GLenum(GL_COLOR_ATTACHMENT2) : GLenum(GL_NONE)};
-  glNamedFramebufferDrawBuffers(g.fbo, 3, bufs);
+  if (g.fbW == width && g.fbH == height) return Status::ok();
+  g.releaseTargets();
+  auto texture = [&](GLenum format) {
+    GLuint t = 0;
+    glCreateTextures(GL_TEXTURE_2D, 1, &t);
+    glTextureStorage2D(t, 1, format, width, height);
+    glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    return t;
+  };
+  g.colorTex = texture(GL_RGBA8);
+  g.linearTex = texture(GL_R32F);
+  g.postTex = texture(GL_RGBA8);
+  glCreateRenderbuffers(1, &g.depthRb);
+  glCreateRenderbuffers(1, &g.normalRb);
+  glCreateRenderbuffers(1, &g.cellRb);
+  glNamedRenderbufferStorage(g.normalRb, GL_RGBA16F, width, height);
+  glNamedRenderbufferStorage(g.cellRb, GL_R32UI, width, height);
+  glNamedRenderbufferStorage(g.depthRb, GL_DEPTH_COMPONENT32F, width, height);
+  glCreateFramebuffers(1, &g.fbo);
+  glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT0, g.colorTex, 0);
+  glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT1, g.linearTex, 0);
+  glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT2, GL_RENDERBUFFER, g.normalRb);
+  glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT3, GL_RENDERBUFFER, g.cellRb);
+  glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
+  glCreateFramebuffers(1, &g.postFbo);
+  glNamedFramebufferTexture(g.postFbo, GL_COLOR_ATTACHMENT0, g.postTex, 0);
+  if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE ||
+      glCheckNamedFramebufferStatus(g.postFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    return Status::internal("framebuffer incomplete at " + std::to_string(width) + "x" + std::to_string(height));
+  g.fbW = width;
+  g.fbH = height;
+  return Status::ok();
+}
 
-  const auto t0 = std::chrono::steady_clock::now();
-  uploadPages(uint64_t(64) << 20);  // streamed packs: 64 MiB of pages per frame
-  // Camera relative to the pack origin, in double, then split for the GPU.
-  const Eigen::Vector3d camRel = cam.eye - origin_;
-  float hi[3], lo[3];
-  for (int a = 0; a < 3; ++a) splitDouble(camRel[a], hi[a], lo[a]);
-  const double np = nearPlane();
-  const Eigen::Matrix3f rot = cam.viewRotation().cast<float>();
-  const Eigen::Matrix4f proj = cam.projection(np).cast<float>();
-  const Eigen::Vector3f fwd = cam.forward().cast<float>();
-  FrameStats& st = out.stats;
-  st = FrameStats{};
-  st.fragmentsAreInvocations = g.fragTarget == GL_FRAGMENT_SHADER_INVOCATIONS_ARB;
-  VisibleSet vis;
-  if (s.mode == RenderMode::kParallax) {
-    CullOptions co = s.cull;
-    co.clipBox = s.clip.box;
-    co.clipLo = s.clip.lo - origin_;
-    co.clipHi = s.clip.hi - origin_;
-    co.clipPlane = s.clip.plane;
-    co.planePoint = s.clip.point - origin_;
-    co.planeNormal = s.clip.normal.normalized();
-    co.maxSteps = std::max(1, s.iterations);
-    co.pageResident = pagesPending() ? g.resident.data() : nullptr;
-    co.minSteps = std::min(co.minSteps, co.maxSteps);
-    culler_->compute(cam, camRel, np, co, vis);
-    st.submitted = vis.submitted;
-    st.culled = vis.culled;
-    st.drawn = static_cast<uint32_t>(vis.front.size() + vis.inside.size());
-    st.inside = static_cast<uint32_t>(vis.inside.size());
-    st.splats = static_cast<uint32_t>(vis.splats.size());
-    // One buffer: front items, then inside items, then splats, each list starting at an
-    // offset the SSBO binding accepts.
-    size_t bytes = 0;
-    for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
-    if (GLsizeiptr(bytes) > g.itemCapacity) {
-      g.itemCapacity = GLsizeiptr(std::max<size_t>(bytes, 4096));
-      glNamedBufferData(g.itemBuf, g.itemCapacity, nullptr, GL_STREAM_DRAW);
-    }
-    size_t off = 0;
-    for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) {
-      if (!list->empty()) glNamedBufferSubData(g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)), list->data());
-      off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
-    }
+// Which boxes this frame draws (front faces, inside boxes, splats) and with how many steps,
+// uploaded into one buffer: each list starts at an offset the SSBO binding accepts.
+void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double np, const RenderSettings& s,
+                                VisibleSet& vis, FrameStats& st) {
+  Gl& g = *gl_;
+  CullOptions co = s.cull;
+  co.clipBox = s.clip.box;
+  co.clipLo = s.clip.lo - origin_;
+  co.clipHi = s.clip.hi - origin_;
+  co.clipPlane = s.clip.plane;
+  co.planePoint = s.clip.point - origin_;
+  co.planeNormal = s.clip.normal.normalized();
+  co.maxSteps = std::max(1, s.iterations);
+  co.pageResident = pagesPending() ? g.resident.data() : nullptr;
+  co.minSteps = std::min(co.minSteps, co.maxSteps);
+  culler_->compute(cam, camRel, np, co, vis);
+  st.submitted = vis.submitted;
+  st.culled = vis.culled;
+  st.drawn = static_cast<uint32_t>(vis.front.size() + vis.inside.size());
+  st.inside = static_cast<uint32_t>(vis.inside.size());
+  st.splats = static_cast<uint32_t>(vis.splats.size());
+  size_t bytes = 0;
+  for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+  if (GLsizeiptr(bytes) > g.itemCapacity) {
+    g.itemCapacity = GLsizeiptr(std::max<size_t>(bytes, 4096));
+    glNamedBufferData(g.itemBuf, g.itemCapacity, nullptr, GL_STREAM_DRAW);
   }
+  size_t off = 0;
+  for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) {
+    if (!list->empty()) glNamedBufferSubData(g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)), list->data());
+    off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+  }
+}
 
-  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
-  glViewport(0, 0, cam.width, cam.height);
-  glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_GREATER);
-  glDepthMask(GL_TRUE);
-  const float bg[4] = {s.background[0], s.background[1], s.background[2], 1.f};
-  const float inf = std::numeric_limits<float>::infinity();
-  const float depthInit[4] = {inf, 0, 0, 0};
-  const float zero4[4] = {0, 0, 0, 0};
-  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 0, bg);
-  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 1, depthInit);
-  if (readBack & kReadNormals) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
-  const float zero = 0.f;
-  glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.cellBuf);
-  glBindTextureUnit(0, g.heightTex);
-  glBindTextureUnit(1, g.pageColorTex);
-  glBindTextureUnit(2, g.normalTex);
-  const bool color = s.useColor && hasColor_;
-  // Height ramp and clip geometry, camera-relative (differences formed in double).
+// Uniforms every surface program reads: camera, projection, shading, clipping.
+void Renderer::setCommonUniforms(GLuint p, const FrameUniforms& f, const RenderSettings& s) const {
+  glUseProgram(p);
+  glUniformMatrix3fv(glGetUniformLocation(p, "viewRotation"), 1, GL_FALSE, f.rot.data());
+  glUniformMatrix4fv(glGetUniformLocation(p, "projection"), 1, GL_FALSE, f.proj.data());
+  glUniform3fv(glGetUniformLocation(p, "camHi"), 1, f.hi);
+  glUniform3fv(glGetUniformLocation(p, "camLo"), 1, f.lo);
+  glUniform1i(glGetUniformLocation(p, "refineSteps"), std::max(0, s.refineSteps));
+  glUniform1i(glGetUniformLocation(p, "maxSteps"), std::max(1, s.iterations));
+  glUniform1f(glGetUniformLocation(p, "nearPlane"), float(f.nearPlane));
+  glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, f.fwd.data());
+  glUniform1i(glGetUniformLocation(p, "useColor"), s.useColor && hasColor_ ? 1 : 0);
+  glUniform1i(glGetUniformLocation(p, "storedNormals"), hasNormals_ ? 1 : 0);
+  glUniform3fv(glGetUniformLocation(p, "baseColor"), 1, s.baseColor);
+  glUniform1i(glGetUniformLocation(p, "shadingMode"), int(s.shading));
+  glUniform1i(glGetUniformLocation(p, "headLight"), s.headLight ? 1 : 0);
+  glUniform3fv(glGetUniformLocation(p, "lightDir"), 1, f.light.data());
+  glUniform3fv(glGetUniformLocation(p, "upAxis"), 1, f.up.data());
+  glUniform1f(glGetUniformLocation(p, "heightLo"), f.heightLo);
+  glUniform1f(glGetUniformLocation(p, "heightHi"), f.heightHi);
+  glUniform1i(glGetUniformLocation(p, "clipFlags"), (s.clip.box ? 1 : 0) | (s.clip.plane ? 2 : 0));
+  glUniform3fv(glGetUniformLocation(p, "clipBoxMin"), 1, f.clipLo.data());
+  glUniform3fv(glGetUniformLocation(p, "clipBoxMax"), 1, f.clipHi.data());
+  glUniform4fv(glGetUniformLocation(p, "clipPlane"), 1, f.plane.data());
+}
+
+// The frame's camera-relative constants (differences formed in double, then float).
+Renderer::FrameUniforms Renderer::frameUniforms(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel,
+                                                double np) const {
+  FrameUniforms f;
+  for (int a = 0; a < 3; ++a) splitDouble(camRel[a], f.hi[a], f.lo[a]);
+  f.nearPlane = np;
+  f.rot = cam.viewRotation().cast<float>();
+  f.proj = cam.projection(np).cast<float>();
+  f.fwd = cam.forward().cast<float>();
+  // Height ramp range: the bounding box's corners along up.
   const Eigen::Vector3d upD = s.up.normalized();
-  const Eigen::Vector3f upF = upD.cast<float>();
+  f.up = upD.cast<float>();
   double hLo = 1e300, hHi = -1e300;
   for (int k = 0; k < 8; ++k) {
     const Eigen::Vector3d corner(k & 1 ? boundsMax_.x() : boundsMin_.x(), k & 2 ? boundsMax_.y() : boundsMin_.y(),
@@ -417,109 +419,86 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     hLo = std::min(hLo, h);
     hHi = std::max(hHi, h);
   }
-  const float heightLo = float(hLo), heightHi = float(hHi);
-  const Eigen::Vector3f lightF = s.lightDir.normalized().cast<float>();
-  const Eigen::Vector3f clipLo = (s.clip.lo - cam.eye).cast<float>(), clipHi = (s.clip.hi - cam.eye).cast<float>();
+  f.heightLo = float(hLo);
+  f.heightHi = float(hHi);
+  f.light = s.lightDir.normalized().cast<float>();
+  f.clipLo = (s.clip.lo - cam.eye).cast<float>();
+  f.clipHi = (s.clip.hi - cam.eye).cast<float>();
   const Eigen::Vector3d pn = s.clip.normal.normalized();
-  const Eigen::Vector4f plane(float(pn.x()), float(pn.y()), float(pn.z()), float(-pn.dot(s.clip.point - cam.eye)));
-  auto common = [&](GLuint p) {
-    glUseProgram(p);
-    glUniformMatrix3fv(glGetUniformLocation(p, "viewRotation"), 1, GL_FALSE, rot.data());
-    glUniformMatrix4fv(glGetUniformLocation(p, "projection"), 1, GL_FALSE, proj.data());
-    glUniform3fv(glGetUniformLocation(p, "camHi"), 1, hi);
-    glUniform3fv(glGetUniformLocation(p, "camLo"), 1, lo);
-    glUniform1i(glGetUniformLocation(p, "refineSteps"), std::max(0, s.refineSteps));
-    glUniform1i(glGetUniformLocation(p, "maxSteps"), std::max(1, s.iterations));
-    glUniform1f(glGetUniformLocation(p, "nearPlane"), float(np));
-    glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, fwd.data());
-    glUniform1i(glGetUniformLocation(p, "useColor"), color ? 1 : 0);
-    glUniform1i(glGetUniformLocation(p, "storedNormals"), hasNormals_ ? 1 : 0);
-    glUniform3fv(glGetUniformLocation(p, "baseColor"), 1, s.baseColor);
-    glUniform1i(glGetUniformLocation(p, "shadingMode"), int(s.shading));
-    glUniform1i(glGetUniformLocation(p, "headLight"), s.headLight ? 1 : 0);
-    glUniform3fv(glGetUniformLocation(p, "lightDir"), 1, lightF.data());
-    glUniform3fv(glGetUniformLocation(p, "upAxis"), 1, upF.data());
-    glUniform1f(glGetUniformLocation(p, "heightLo"), heightLo);
-    glUniform1f(glGetUniformLocation(p, "heightHi"), heightHi);
-    glUniform1i(glGetUniformLocation(p, "clipFlags"), (s.clip.box ? 1 : 0) | (s.clip.plane ? 2 : 0));
-    glUniform3fv(glGetUniformLocation(p, "clipBoxMin"), 1, clipLo.data());
-    glUniform3fv(glGetUniformLocation(p, "clipBoxMax"), 1, clipHi.data());
-    glUniform4fv(glGetUniformLocation(p, "clipPlane"), 1, plane.data());
-  };
-  glBeginQuery(GL_TIME_ELAPSED, g.timeQuery);
-  glBeginQuery(g.fragTarget, g.fragQuery);
-  if (s.mode == RenderMode::kParallax) {
-    glBindVertexArray(g.vao);
-    glEnable(GL_CULL_FACE);
-    size_t off = 0;
-    auto drawList = [&](const std::vector<DrawItem>& list, GLuint program, GLenum cullFace, GLenum prim, GLsizei verts) {
-      if (!list.empty()) {
-        common(program);
-        glCullFace(cullFace);
-        glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list.size() * sizeof(DrawItem)));
-        glDrawArraysInstanced(prim, 0, verts, GLsizei(list.size()));
-      }
-      off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
-    };
-    drawList(vis.front, g.front, GL_BACK, GL_TRIANGLES, 36);   // camera outside: front faces
-    drawList(vis.inside, g.inside, GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
-    glDisable(GL_CULL_FACE);
-    drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
-    if (s.showBoxes) {
-      // The decomposition view: every drawn box's edges, depth-tested against the surface.
-      off = 0;
-      const GLenum only0[] = {GL_COLOR_ATTACHMENT0, GL_NONE, GL_NONE};
-      glNamedFramebufferDrawBuffers(g.fbo, 3, only0);
-      glDepthMask(GL_FALSE);
-      glDepthFunc(GL_GEQUAL);
-      common(g.boxes);
-      for (const auto* list : {&vis.front, &vis.inside}) {
-        if (!list->empty()) {
-          glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)));
-          glDrawArraysInstanced(GL_LINES, 0, 24, GLsizei(list->size()));
-        }
-        off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
-      }
-      glDepthMask(GL_TRUE);
-      glDepthFunc(GL_GREATER);
-      glNamedFramebufferDrawBuffers(g.fbo, 3, bufs);
-    }
-  } else {
-    common(g.points);
-    const double ty = std::tan(cam.fovDeg * M_PI / 360.0);
-    glUniform1f(glGetUniformLocation(g.points, "spacingPixels"), float(spacing_ * cam.height / (2 * ty)));
-    glEnable(GL_PROGRAM_POINT_SIZE);
-    glDisable(GL_CULL_FACE);
-    glBindVertexArray(g.pointVao);
-    glDrawArrays(GL_POINTS, 0, GLsizei(pointCount_));
-    st.points = pointCount_;
-  }
-  g.lastWasPost = false;
-  if (s.edl) {
-    glBindFramebuffer(GL_FRAMEBUFFER, g.postFbo);
-    glDisable(GL_DEPTH_TEST);
-    glUseProgram(g.edl);
-    glUniform1f(glGetUniformLocation(g.edl, "strength"), s.edlStrength);
-    glUniform1f(glGetUniformLocation(g.edl, "radius"), s.edlRadius);
-    glBindTextureUnit(0, g.colorTex);
-    glBindTextureUnit(1, g.linearTex);
-    glBindVertexArray(g.vao);
-    glDrawArrays(GL_TRIANGLES, 0, 3);
-    glEnable(GL_DEPTH_TEST);
-    g.lastWasPost = true;
-  }
-  glEndQuery(g.fragTarget);
-  glEndQuery(GL_TIME_ELAPSED);
-  glFinish();
-  st.cpuMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  GLuint64 ns = 0, frags = 0;
-  glGetQueryObjectui64v(g.timeQuery, GL_QUERY_RESULT, &ns);
-  glGetQueryObjectui64v(g.fragQuery, GL_QUERY_RESULT, &frags);
-  st.gpuMs = double(ns) / 1e6;
-  st.fragments = frags;
-  out.milliseconds = st.cpuMs;
-  out.cellsDrawn = st.drawn;
+  f.plane = Eigen::Vector4f(float(pn.x()), float(pn.y()), float(pn.z()), float(-pn.dot(s.clip.point - cam.eye)));
+  return f;
+}
 
+// The height fields: front faces of boxes the camera is outside of, back faces of those it is
+// inside, splats for sub-pixel boxes; then, when asked, the boxes' edges.
+void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const RenderSettings& s, const GLenum* bufs) {
+  Gl& g = *gl_;
+  glBindVertexArray(g.vao);
+  glEnable(GL_CULL_FACE);
+  size_t off = 0;
+  auto drawList = [&](const std::vector<DrawItem>& list, GLuint program, GLenum cullFace, GLenum prim, GLsizei verts) {
+    if (!list.empty()) {
+      setCommonUniforms(program, f, s);
+      glCullFace(cullFace);
+      glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list.size() * sizeof(DrawItem)));
+      glDrawArraysInstanced(prim, 0, verts, GLsizei(list.size()));
+    }
+    off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
+  };
+  drawList(vis.front, g.front, GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
+  drawList(vis.inside, g.inside, GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+  glDisable(GL_CULL_FACE);
+  drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
+  if (!s.showBoxes) return;
+  // The decomposition view: every drawn box's edges, depth-tested against the surface.
+  off = 0;
+  const GLenum only0[] = {GL_COLOR_ATTACHMENT0, GL_NONE, GL_NONE, GL_NONE};
+  glNamedFramebufferDrawBuffers(g.fbo, 4, only0);
+  glDepthMask(GL_FALSE);
+  glDepthFunc(GL_GEQUAL);
+  setCommonUniforms(g.boxes, f, s);
+  for (const auto* list : {&vis.front, &vis.inside}) {
+    if (!list->empty()) {
+      glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)));
+      glDrawArraysInstanced(GL_LINES, 0, 24, GLsizei(list->size()));
+    }
+    off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+  }
+  glDepthMask(GL_TRUE);
+  glDepthFunc(GL_GREATER);
+  glNamedFramebufferDrawBuffers(g.fbo, 4, bufs);
+}
+
+void Renderer::drawPoints(const Camera& cam, const FrameUniforms& f, const RenderSettings& s, FrameStats& st) {
+  Gl& g = *gl_;
+  setCommonUniforms(g.points, f, s);
+  const double ty = std::tan(cam.fovDeg * M_PI / 360.0);
+  glUniform1f(glGetUniformLocation(g.points, "spacingPixels"), float(spacing_ * cam.height / (2 * ty)));
+  glEnable(GL_PROGRAM_POINT_SIZE);
+  glDisable(GL_CULL_FACE);
+  glBindVertexArray(g.pointVao);
+  glDrawArrays(GL_POINTS, 0, GLsizei(pointCount_));
+  st.points = pointCount_;
+}
+
+// Eye-dome lighting into the post-processing target.
+void Renderer::drawEdl(const RenderSettings& s) {
+  Gl& g = *gl_;
+  glBindFramebuffer(GL_FRAMEBUFFER, g.postFbo);
+  glDisable(GL_DEPTH_TEST);
+  glUseProgram(g.edl);
+  glUniform1f(glGetUniformLocation(g.edl, "strength"), s.edlStrength);
+  glUniform1f(glGetUniformLocation(g.edl, "radius"), s.edlRadius);
+  glBindTextureUnit(0, g.colorTex);
+  glBindTextureUnit(1, g.linearTex);
+  glBindVertexArray(g.vao);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glEnable(GL_DEPTH_TEST);
+}
+
+// Copies what was asked for out of the framebuffer, rows flipped so row 0 is the top.
+void Renderer::readBack(const Camera& cam, unsigned what, FrameResult& out) {
+  Gl& g = *gl_;
   auto readFlipped = [&](GLenum attachment, GLenum format, GLenum type, size_t pixelBytes, void* dst) {
     std::vector<uint8_t> rows(size_t(cam.width) * cam.height * pixelBytes);
     const bool post = attachment == GL_COLOR_ATTACHMENT0 && g.lastWasPost;
@@ -531,20 +510,89 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     for (int y = 0; y < cam.height; ++y)
       std::memcpy(static_cast<uint8_t*>(dst) + size_t(y) * stride, &rows[size_t(cam.height - 1 - y) * stride], stride);
   };
-  if (readBack & kReadColor) {
+  const size_t n = size_t(cam.width) * cam.height;
+  if (what & kReadColor) {
     out.color.width = cam.width;
     out.color.height = cam.height;
-    out.color.rgba.resize(size_t(cam.width) * cam.height * 4);
+    out.color.rgba.resize(n * 4);
     readFlipped(GL_COLOR_ATTACHMENT0, GL_RGBA, GL_UNSIGNED_BYTE, 4, out.color.rgba.data());
   }
-  if (readBack & kReadDepth) {
-    out.depth.resize(size_t(cam.width) * cam.height);
+  if (what & kReadDepth) {
+    out.depth.resize(n);
     readFlipped(GL_COLOR_ATTACHMENT1, GL_RED, GL_FLOAT, 4, out.depth.data());
   }
-  if (readBack & kReadNormals) {
-    out.normals.resize(size_t(cam.width) * cam.height * 3);
+  if (what & kReadNormals) {
+    out.normals.resize(n * 3);
     readFlipped(GL_COLOR_ATTACHMENT2, GL_RGB, GL_FLOAT, 12, out.normals.data());
   }
+  if (what & kReadCells) {
+    out.cells.resize(n);
+    readFlipped(GL_COLOR_ATTACHMENT3, GL_RED_INTEGER, GL_UNSIGNED_INT, 4, out.cells.data());
+  }
+}
+
+Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult& out, unsigned readBackMask) {
+  SA_RETURN_IF_ERROR(cam.validate());
+  if (s.mode == RenderMode::kPoints && !hasPoints())
+    return Status::badInput("points mode: no source points loaded for this pack");
+  Gl& g = *gl_;
+  SA_RETURN_IF_ERROR(ensureTargets(cam.width, cam.height));
+  // The normal and cell attachments are written only when asked for (eval, tests), so bench
+  // frames do not pay.
+  const GLenum bufs[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1,
+                         (readBackMask & kReadNormals) ? GLenum(GL_COLOR_ATTACHMENT2) : GLenum(GL_NONE),
+                         (readBackMask & kReadCells) ? GLenum(GL_COLOR_ATTACHMENT3) : GLenum(GL_NONE)};
+  glNamedFramebufferDrawBuffers(g.fbo, 4, bufs);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  uploadPages(uint64_t(64) << 20);  // streamed packs: 64 MiB of pages per frame
+  const Eigen::Vector3d camRel = cam.eye - origin_;  // the camera relative to the pack origin, in double
+  const double np = nearPlane();
+  FrameStats& st = out.stats;
+  st = FrameStats{};
+  st.fragmentsAreInvocations = g.fragTarget == GL_FRAGMENT_SHADER_INVOCATIONS_ARB;
+  VisibleSet vis;
+  if (s.mode == RenderMode::kParallax) uploadVisibility(cam, camRel, np, s, vis, st);
+
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glViewport(0, 0, cam.width, cam.height);
+  glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_GREATER);
+  glDepthMask(GL_TRUE);
+  const float bg[4] = {s.background[0], s.background[1], s.background[2], 1.f};
+  const float depthInit[4] = {std::numeric_limits<float>::infinity(), 0, 0, 0};
+  const float zero4[4] = {0, 0, 0, 0};
+  const GLuint noCell[4] = {0, 0, 0, 0};
+  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 0, bg);
+  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 1, depthInit);
+  if (readBackMask & kReadNormals) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
+  if (readBackMask & kReadCells) glClearNamedFramebufferuiv(g.fbo, GL_COLOR, 3, noCell);
+  const float zero = 0.f;
+  glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.cellBuf);
+  glBindTextureUnit(0, g.heightTex);
+  glBindTextureUnit(1, g.pageColorTex);
+  glBindTextureUnit(2, g.normalTex);
+  const FrameUniforms f = frameUniforms(cam, s, camRel, np);
+  glBeginQuery(GL_TIME_ELAPSED, g.timeQuery);
+  glBeginQuery(g.fragTarget, g.fragQuery);
+  if (s.mode == RenderMode::kParallax) drawCells(vis, f, s, bufs);
+  else drawPoints(cam, f, s, st);
+  g.lastWasPost = s.edl;
+  if (s.edl) drawEdl(s);
+  glEndQuery(g.fragTarget);
+  glEndQuery(GL_TIME_ELAPSED);
+  glFinish();
+  st.cpuMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  GLuint64 ns = 0, frags = 0;
+  glGetQueryObjectui64v(g.timeQuery, GL_QUERY_RESULT, &ns);
+  glGetQueryObjectui64v(g.fragQuery, GL_QUERY_RESULT, &frags);
+  st.gpuMs = double(ns) / 1e6;
+  st.fragments = frags;
+  out.milliseconds = st.cpuMs;
+  out.cellsDrawn = st.drawn;
+  readBack(cam, readBackMask, out);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   const GLenum err = glGetError();
   if (err != GL_NO_ERROR) return Status::internal("OpenGL error " + std::to_string(err) + " while rendering");

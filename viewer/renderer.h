@@ -58,12 +58,13 @@ struct FrameStats {
   bool fragmentsAreInvocations = false;
 };
 
-enum ReadBack : unsigned { kReadColor = 1, kReadDepth = 2, kReadNormals = 4 };
+enum ReadBack : unsigned { kReadColor = 1, kReadDepth = 2, kReadNormals = 4, kReadCells = 8 };
 
 struct FrameResult {
   Image color;                // RGBA8, row 0 at the top
   std::vector<float> depth;   // linear view depth, row 0 at the top, +inf where nothing was hit
   std::vector<float> normals; // xyz per pixel (world), zero where nothing was hit
+  std::vector<uint32_t> cells; // the index + 1 of the cell that drew the pixel, 0 where none (kReadCells)
   FrameStats stats;
   double milliseconds = 0;    // == stats.cpuMs
   uint32_t cellsDrawn = 0;    // boxes ray-cast (front + inside)
@@ -81,7 +82,7 @@ class Renderer {
   // The points baseline: positions relative to the pack origin (xyz floats), RGBA8 colours.
   Status setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing);
   bool hasPoints() const { return pointCount_ > 0; }
-  Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, unsigned readBack);
+  Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, unsigned readBackMask);
   Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, bool readDepth) {
     return render(cam, settings, out, kReadColor | (readDepth ? kReadDepth : 0u));
   }
@@ -94,7 +95,25 @@ class Renderer {
   double nearPlane() const;
 
  private:
+  struct FrameUniforms {
+    float hi[3], lo[3];
+    double nearPlane = 0;
+    Eigen::Matrix3f rot;
+    Eigen::Matrix4f proj;
+    Eigen::Vector3f fwd, up, light, clipLo, clipHi;
+    Eigen::Vector4f plane;
+    float heightLo = 0, heightHi = 0;
+  };
   void uploadPages(uint64_t budgetBytes);
+  Status ensureTargets(int width, int height);
+  void uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double nearPlane, const RenderSettings& s,
+                        VisibleSet& vis, FrameStats& st);
+  FrameUniforms frameUniforms(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel, double np) const;
+  void setCommonUniforms(unsigned program, const FrameUniforms& f, const RenderSettings& s) const;
+  void drawCells(const VisibleSet& vis, const FrameUniforms& f, const RenderSettings& s, const unsigned* bufs);
+  void drawPoints(const Camera& cam, const FrameUniforms& f, const RenderSettings& s, FrameStats& st);
+  void drawEdl(const RenderSettings& s);
+  void readBack(const Camera& cam, unsigned what, FrameResult& out);
   struct Gl;
   std::unique_ptr<Gl> gl_;
   std::unique_ptr<CellCuller> culler_;

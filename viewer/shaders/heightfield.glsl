@@ -16,7 +16,7 @@ layout(std430, binding = 0) readonly buffer Cells { Cell cells[]; };
 
 layout(binding = 0) uniform usampler2DArray heightPages;  // R16UI, 0 = not covered
 layout(binding = 1) uniform sampler2DArray colorPages;    // RGBA8
-layout(binding = 2) uniform sampler2DArray normalPages;   // RG8: hemi-octahedral normal in the cell frame
+layout(binding = 2) uniform sampler2DArray normalPages;   // RG8: octahedral world normal
 uniform bool storedNormals;                               // the pack has normal pages (FORMAT.md)
 
 // Camera position relative to the pack origin, split into high and low float parts, so
@@ -44,18 +44,22 @@ vec2 texelCoord(Cell c, vec2 uv) {
   return (uv - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * size - 0.5;
 }
 
-// Stored normal of texel (i, j), in the cell frame (FORMAT.md: hemi-octahedral, two bytes).
+// Stored normal of texel (i, j), world coordinates (FORMAT.md: octahedral, two bytes).
 vec3 texelNormal(Cell c, ivec2 ij) {
-  vec2 e = texelFetch(normalPages, ivec3(c.tile.yz + ij, c.tile.x), 0).rg * (255.0 / 127.5) - 1.0;
-  vec2 t = vec2(e.x + e.y, e.x - e.y) * 0.5;
-  return normalize(vec3(t, 1.0 - abs(t.x) - abs(t.y)));
+  vec2 p = texelFetch(normalPages, ivec3(c.tile.yz + ij, c.tile.x), 0).rg * (255.0 / 127.5) - 1.0;
+  float z = 1.0 - abs(p.x) - abs(p.y);
+  vec2 xy = z < 0.0 ? (1.0 - abs(p.yx)) * vec2(p.x < 0.0 ? -1.0 : 1.0, p.y < 0.0 ? -1.0 : 1.0) : p;
+  return normalize(vec3(xy, z));
 }
+
+// A world vector in the cell's frame (M1 of §3.2.2 without the translation).
+vec3 toFrame(Cell c, vec3 w) { return vec3(dot(w, c.axisU.xyz), dot(w, c.axisV.xyz), dot(w, c.axisW.xyz)); }
 
 // The height of texel ij where it is uncovered, next to covered texel n: n's tangent plane
 // (its height and stored normal) continued there. Without it a coverage edge is a flat step
 // half a texel wide, which a grazing ray enters from the side and misses.
 float extrapolatedHeight(Cell c, ivec2 n, float hn, ivec2 ij) {
-  vec3 nn = texelNormal(c, n);
+  vec3 nn = toFrame(c, texelNormal(c, n));
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
   return hn + dot(-nn.xy / max(nn.z, 0.05), vec2(ij - n) * texel);
 }
@@ -84,24 +88,26 @@ float sampleHeight(Cell c, vec2 uv) {
   return mix(mix(h00, h10, a.x), mix(h01, h11, a.x), a.y);
 }
 
-// Stored normal at (u, v), interpolated like the heights: bilinear where the four texels are
-// covered, else the nearest texel's. Normals come from the data (the mesh's triangles, or the
-// smoothed point normals), so they agree across cell borders where heights' gradients cannot.
+// Stored normal at (u, v), world coordinates: bilinear over the four texels around it (decoded
+// vectors, not bytes), the uncovered ones left out. Normals come from the data (the mesh's triangles, or the points' smooth normal field), so
+// they agree across cell borders where heights' gradients cannot.
 vec3 sampleNormal(Cell c, vec2 uv) {
   vec2 size = c.boxW.zw;
   vec2 f = clamp(texelCoord(c, uv), vec2(-0.5), size - 0.5);
   ivec2 i0 = ivec2(floor(f));
   vec2 a = f - vec2(i0);
-  bool all4 = texelHeight(c, i0) != kUncovered && texelHeight(c, i0 + ivec2(1, 0)) != kUncovered &&
-              texelHeight(c, i0 + ivec2(0, 1)) != kUncovered && texelHeight(c, i0 + ivec2(1, 1)) != kUncovered;
-  if (!all4) return texelNormal(c, clamp(ivec2(floor(f + 0.5)), ivec2(0), ivec2(size) - 1));
-  vec3 n = mix(mix(texelNormal(c, i0), texelNormal(c, i0 + ivec2(1, 0)), a.x),
-               mix(texelNormal(c, i0 + ivec2(0, 1)), texelNormal(c, i0 + ivec2(1, 1)), a.x), a.y);
+  vec3 n = vec3(0.0);
+  for (int k = 0; k < 4; ++k) {
+    ivec2 o = ivec2(k & 1, k >> 1);
+    float w = (o.x == 1 ? a.x : 1.0 - a.x) * (o.y == 1 ? a.y : 1.0 - a.y);
+    if (texelHeight(c, i0 + o) != kUncovered) n += w * texelNormal(c, i0 + o);
+  }
+  if (dot(n, n) == 0.0) return texelNormal(c, clamp(ivec2(floor(f + 0.5)), ivec2(0), ivec2(size) - 1));
   return normalize(n);
 }
 
-// Normal from the height gradient (packs without normal pages): central differences over a
-// texel, one-sided where a neighbour is uncovered.
+// Normal from the height gradient (packs without normal pages), in the cell's frame: central
+// differences over a texel, one-sided where a neighbour is uncovered.
 vec3 gradientNormal(Cell c, vec2 uv) {
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
   float h = sampleHeight(c, uv);

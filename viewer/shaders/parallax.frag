@@ -32,6 +32,7 @@ uniform vec3 baseColor;
 layout(location = 0) out vec4 outColor;
 layout(location = 1) out float outDepth;  // linear view depth along the forward axis
 layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
+layout(location = 3) out uint outCell;    // the cell's index + 1 (eval, tests: which cell drew a pixel)
 
 void main() {
   Cell c = cells[vCell];
@@ -62,8 +63,13 @@ void main() {
   float hh = sampleHeight(c, hit.xy);
   if (hh == kUncovered) discard;
 
-  vec3 nFrame = storedNormals ? sampleNormal(c, hit.xy) : gradientNormal(c, hit.xy);
-  vec3 nWorld = c.axisU.xyz * nFrame.x + c.axisV.xyz * nFrame.y + c.axisW.xyz * nFrame.z;
+  vec3 nWorld;
+  if (storedNormals) {
+    nWorld = sampleNormal(c, hit.xy);
+  } else {
+    vec3 nFrame = gradientNormal(c, hit.xy);
+    nWorld = c.axisU.xyz * nFrame.x + c.axisV.xyz * nFrame.y + c.axisW.xyz * nFrame.z;
+  }
 
   // Camera-relative world position of the hit, then its depth.
   vec3 rel = cellRelativeToCamera(c);
@@ -76,4 +82,5 @@ void main() {
   outColor = vec4(shade(albedo, nWorld, world), 1.0);
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), 0.0);
+  outCell = uint(vCell) + 1u;
 }

@@ -13,12 +13,14 @@ flat out vec3 vNormal;
 flat out vec3 vToEye;
 flat out vec3 vColor;
 out float vViewDepth;
+flat out int vCell;
 uniform vec3 viewForward;
 uniform bool useColor;
 uniform vec3 baseColor;
 
 void main() {
   Cell c = cells[items[gl_InstanceID].x];
+  vCell = int(items[gl_InstanceID].x);
   vec3 rel = cellRelativeToCamera(c);
   gl_Position = projection * vec4(viewRotation * rel, 1.0);
   gl_PointSize = 1.0;
