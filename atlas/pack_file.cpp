@@ -65,7 +65,7 @@ Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vect
   uint64_t end = hghtOff_ + pageTexels * meta_.pageCount * 2;
   if (meta_.flags & kPackHasNormals) {
     nrmlOff_ = alignUp(end);
-    end = nrmlOff_ + pageTexels * meta_.pageCount * 2;
+    end = nrmlOff_ + pageTexels * meta_.pageCount * kNormalBytes;
   }
   if (meta_.flags & kPackHasColor) {
     colrOff_ = alignUp(end);
@@ -86,7 +86,7 @@ Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const 
   const uint64_t pageTexels = static_cast<uint64_t>(P) * meta_.pageHeight;
   if (!(meta_.flags & kPackHasNormals)) normals = nullptr;
   std::vector<uint16_t> row(W + 2);
-  std::vector<uint8_t> rown(normals ? (W + 2) * 2 : 0);
+  std::vector<uint8_t> rown(normals ? (W + 2) * kNormalBytes : 0);
   std::vector<uint8_t> rowc(rgba ? (W + 2) * 4 : 0);
   // Rows -1 .. H (gutter rows repeat the edge rows; gutter columns repeat the edge texels).
   for (int64_t j = -1; j <= static_cast<int64_t>(H); ++j) {
@@ -94,12 +94,13 @@ Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const 
     for (uint32_t i = 0; i < W + 2; ++i) {
       const uint32_t si = std::min(std::max(i, 1u) - 1, W - 1);
       row[i] = heights[static_cast<size_t>(sj) * W + si];
-      if (normals) std::memcpy(&rown[i * 2], &normals[(static_cast<size_t>(sj) * W + si) * 2], 2);
+      if (normals)
+        std::memcpy(&rown[i * kNormalBytes], &normals[(static_cast<size_t>(sj) * W + si) * kNormalBytes], kNormalBytes);
       if (rgba) std::memcpy(&rowc[i * 4], &rgba[(static_cast<size_t>(sj) * W + si) * 4], 4);
     }
     const uint64_t texel = pageTexels * c.page + static_cast<uint64_t>(c.tileY + j) * P + (c.tileX - 1);
     SA_RETURN_IF_ERROR(file_.pwriteAll(row.data(), row.size() * 2, hghtOff_ + texel * 2));
-    if (normals) SA_RETURN_IF_ERROR(file_.pwriteAll(rown.data(), rown.size(), nrmlOff_ + texel * 2));
+    if (normals) SA_RETURN_IF_ERROR(file_.pwriteAll(rown.data(), rown.size(), nrmlOff_ + texel * kNormalBytes));
     if (rgba) SA_RETURN_IF_ERROR(file_.pwriteAll(rowc.data(), rowc.size(), colrOff_ + texel * 4));
   }
   return Status::ok();
@@ -118,7 +119,7 @@ Status PackWriter::finish() {
   const uint64_t hSize = pageTexels * meta_.pageCount * 2;
   sec.push_back(makeSection("HGHT", hghtOff_, hSize, crcOfFile(file_.fd(), hghtOff_, hSize)));
   if (meta_.flags & kPackHasNormals)
-    sec.push_back(makeSection("NRML", nrmlOff_, hSize, crcOfFile(file_.fd(), nrmlOff_, hSize)));
+    sec.push_back(makeSection("NRML", nrmlOff_, hSize / 2 * kNormalBytes, crcOfFile(file_.fd(), nrmlOff_, hSize / 2 * kNormalBytes)));
   if (meta_.flags & kPackHasColor) {
     const uint64_t cSize = pageTexels * meta_.pageCount * 4;
     sec.push_back(makeSection("COLR", colrOff_, cSize, crcOfFile(file_.fd(), colrOff_, cSize)));
@@ -222,7 +223,7 @@ Status PackReader::open(const std::string& path) {
   hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
   if (meta_->flags & kPackHasNormals) {
     const SectionEntry* nrml = find("NRML");
-    if (!nrml || nrml->size != pageTexels * meta_->pageCount * 2)
+    if (!nrml || nrml->size != pageTexels * meta_->pageCount * kNormalBytes)
       return Status::badInput(path + ": normal flag set but NRML section missing or of the wrong size");
     nrml_ = base_ + nrml->offset;
   }
@@ -261,7 +262,7 @@ const uint8_t* PackReader::colorPage(uint32_t page) const {
 }
 
 const uint8_t* PackReader::normalPage(uint32_t page) const {
-  return nrml_ ? nrml_ + uint64_t(page) * pageTexels() * 2 : nullptr;
+  return nrml_ ? nrml_ + uint64_t(page) * pageTexels() * kNormalBytes : nullptr;
 }
 
 std::string PackReader::note() const {

@@ -21,8 +21,8 @@ class PackWriter {
   // `cells` must already carry their tile placements; `meta` the page size and count.
   Status open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
               const std::string& note);
-  // Writes one tile (tileW x tileH, row-major) and its gutter: heights, encoded normals (2 bytes
-  // per texel; may be null when the pack has no normal pages) and colours (4 bytes; may be null
+  // Writes one tile (tileW x tileH, row-major) and its gutter: heights, encoded normals
+  // (kNormalBytes per texel; may be null when the pack has no normal pages) and colours (4 bytes; may be null
   // when the pack has no colour). Thread-safe for different cells.
   Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
   // Widens a cell's height range before its tile is written (not thread-safe for the same
@@ -82,9 +82,9 @@ class PackReader {
   uint16_t texel(const CellRecord& c, int i, int j) const {
     return heightPage(c.page)[(size_t)(c.tileY + j) * meta_->pageWidth + (c.tileX + i)];
   }
-  // Encoded normal of cell c at texel (i, j) (2 bytes; FORMAT.md); needs hasNormals().
+  // Encoded normal of cell c at texel (i, j) (kNormalBytes; FORMAT.md); needs hasNormals().
   const uint8_t* normalTexel(const CellRecord& c, int i, int j) const {
-    return normalPage(c.page) + 2 * ((size_t)(c.tileY + j) * meta_->pageWidth + (c.tileX + i));
+    return normalPage(c.page) + kNormalBytes * ((size_t)(c.tileY + j) * meta_->pageWidth + (c.tileX + i));
   }
 
  private:

@@ -98,9 +98,14 @@ inline double decodeHeight(uint16_t k, double wMin, double wMax) {
   return wMin + (static_cast<double>(k) - 1.0) / 65534.0 * (wMax - wMin);
 }
 
-// Normal encoding (FORMAT.md): octahedral, world space, two bytes. In world space the same
-// normal gets the same bytes in every cell, so neighbouring cells' shading agrees exactly.
-inline void encodeNormal(double x, double y, double z, uint8_t out[2]) {
+// Normal encoding (FORMAT.md): octahedral, world space, two unsigned components of
+// kNormalBytes / 2 bytes each. In world space the same normal gets the same bits in every cell,
+// so neighbouring cells' shading agrees where their tiles overlap; 16-bit components round
+// nearly equal normals alike (8 bits: 0.45 degree steps, a seam in every close-up: the dragon's
+// seam ratio at the close-up was 3.6 with 8 bits, 1.8 with 16).
+inline constexpr int kNormalBytes = 4;
+inline constexpr double kNormalMax = kNormalBytes == 2 ? 255.0 : 65535.0;  // the largest component value
+inline void encodeNormal(double x, double y, double z, uint8_t out[kNormalBytes]) {
   const double s = std::abs(x) + std::abs(y) + std::abs(z);
   double px = 0, py = 0;
   if (s > 0) {
@@ -111,20 +116,25 @@ inline void encodeNormal(double x, double y, double z, uint8_t out[2]) {
       px = fx;
       py = fy;
     }
-  } else {
-    px = py = 0;  // unknown: +z
   }
-  const double e0 = px * 127.5 + 127.5, e1 = py * 127.5 + 127.5;
-  out[0] = static_cast<uint8_t>(e0 < 0 ? 0 : (e0 > 255 ? 255 : e0 + 0.5));
-  out[1] = static_cast<uint8_t>(e1 < 0 ? 0 : (e1 > 255 ? 255 : e1 + 0.5));
+  const double e[2] = {(px + 1) * kNormalMax / 2, (py + 1) * kNormalMax / 2};
+  for (int k = 0; k < 2; ++k) {
+    const uint32_t v = static_cast<uint32_t>(e[k] < 0 ? 0 : (e[k] > kNormalMax ? kNormalMax : e[k] + 0.5));
+    for (int b = 0; b < kNormalBytes / 2; ++b) out[k * kNormalBytes / 2 + b] = static_cast<uint8_t>(v >> (8 * b));
+  }
 }
 // Writes the unit world normal of an encoded texel.
-inline void decodeNormal(const uint8_t in[2], double n[3]) {
-  const double px = in[0] / 127.5 - 1, py = in[1] / 127.5 - 1;
-  double z = 1 - std::abs(px) - std::abs(py), x = px, y = py;
+inline void decodeNormal(const uint8_t in[kNormalBytes], double n[3]) {
+  double p[2];
+  for (int k = 0; k < 2; ++k) {
+    uint32_t v = 0;
+    for (int b = 0; b < kNormalBytes / 2; ++b) v |= uint32_t(in[k * kNormalBytes / 2 + b]) << (8 * b);
+    p[k] = v / kNormalMax * 2 - 1;
+  }
+  double z = 1 - std::abs(p[0]) - std::abs(p[1]), x = p[0], y = p[1];
   if (z < 0) {
-    x = (1 - std::abs(py)) * (px < 0 ? -1 : 1);
-    y = (1 - std::abs(px)) * (py < 0 ? -1 : 1);
+    x = (1 - std::abs(p[1])) * (p[0] < 0 ? -1 : 1);
+    y = (1 - std::abs(p[0])) * (p[1] < 0 ? -1 : 1);
   }
   const double len = std::sqrt(x * x + y * y + z * z);
   n[0] = x / len;

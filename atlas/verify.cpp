@@ -55,7 +55,7 @@ VerifyReport verifyPack(const PackReader& pack) {
         const int sj = std::clamp(j, 0, int(c.tileH) - 1), sk = std::clamp(k, 0, int(c.tileW) - 1);
         ++r.texelsChecked;
         if (pack.texel(c, k, j) != pack.texel(c, sk, sj) ||
-            (pack.hasNormals() && std::memcmp(pack.normalTexel(c, k, j), pack.normalTexel(c, sk, sj), 2) != 0)) {
+            (pack.hasNormals() && std::memcmp(pack.normalTexel(c, k, j), pack.normalTexel(c, sk, sj), kNormalBytes) != 0)) {
           problem(name + ": gutter texel " + std::to_string(k) + "," + std::to_string(j) + " differs from its edge");
           gutterOk = false;
           break;

@@ -492,10 +492,15 @@ void triangleTile(const PackJob& job, const std::vector<uint32_t>* tris, CellRec
                   uint32_t id, TileGrid& g, TileOutput& tile) {
   const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
   std::vector<double> tri;
+  std::vector<float> normals;
   if (tris)
     for (uint32_t vi : *tris) {
       const Eigen::Vector3d d = vec(&job.dist.vertexPos[3 * size_t(vi)]) - O;
       tri.insert(tri.end(), {d.dot(U), d.dot(V), d.dot(Wn)});
+      Eigen::Vector3f n = 3 * size_t(vi) + 2 < job.dist.vertexNormal.size() ? Eigen::Vector3f(&job.dist.vertexNormal[3 * size_t(vi)])
+                                                                           : Eigen::Vector3f::Zero();
+      if (n.norm() > 0) n.normalize();
+      normals.insert(normals.end(), {n.x(), n.y(), n.z()});
     }
   double wLo = r.box[4], wHi = r.box[5];
   const double reach = std::max(r.box[1] - r.box[0], r.box[3] - r.box[2]);
@@ -506,14 +511,15 @@ void triangleTile(const PackJob& job, const std::vector<uint32_t>* tris, CellRec
   r.box[4] = g.wMin = wLo;
   r.box[5] = g.wMax = wHi;
   writer.setCellHeights(id, wLo, wHi);
-  rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * job.texel, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), true, tile);
+  rasterizeTile(g, tri.data(), tri.size() / 9, 0.5 * job.texel, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180),
+                normals.data(), tile);
 }
 
 // The tile's stored normals from the chunk's normal field (MarginFinder::normalField) at each
 // covered texel's surface point: neighbouring cells then store the same normal where their
 // tiles overlap. Splatted from the tile's own samples, a cell's normals near its border would
 // average a one-sided neighbourhood, several degrees off its neighbour's on a curved surface.
-constexpr double kFieldScale = 1.5;  // the field's radius over the splat radius  // the field's radius over the splat radius  // the field's radius over the splat radius  // the field's radius over the splat radius
+constexpr double kFieldScale = 1.5;  // the field's radius over the splat radius
 
 void fieldNormals(const CellRecord& r, const TileGrid& g, const MarginFinder& margins, double radius, TileOutput& tile) {
   const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
@@ -526,7 +532,7 @@ void fieldNormals(const CellRecord& r, const TileGrid& g, const MarginFinder& ma
     const double h = decodeHeight(tile.heights[t], tile.wMin, tile.wMax);
     const Eigen::Vector3d x = O + U * (g.u0 + (i + 0.5) * g.du) + V * (g.v0 + (j + 0.5) * g.dv) + Wn * h;
     double n[3];
-    decodeNormal(&tile.normals[2 * t], n);
+    decodeNormal(&tile.normals[kNormalBytes * t], n);
     texels.push_back(t);
     xyz.insert(xyz.end(), {x.x(), x.y(), x.z()});
     hints.insert(hints.end(), {float(n[0]), float(n[1]), float(n[2])});
@@ -534,7 +540,29 @@ void fieldNormals(const CellRecord& r, const TileGrid& g, const MarginFinder& ma
   std::vector<float> field(hints.size());
   margins.normalField(xyz.data(), hints.data(), texels.size(), radius, field.data());
   for (size_t k = 0; k < texels.size(); ++k)
-    encodeNormal(field[3 * k], field[3 * k + 1], field[3 * k + 2], &tile.normals[2 * texels[k]]);
+    encodeNormal(field[3 * k], field[3 * k + 1], field[3 * k + 2], &tile.normals[kNormalBytes * texels[k]]);
+}
+
+// Past its own points (in the margin the neighbours' samples fill), a cell keeps only texels
+// that face it: where the surface turns steep in its frame, a texel spans a long stretch of
+// surface and its height and normal are poor, while the neighbouring cell that owns those
+// points sees them face-on. Kept, such texels win the depth test by noise and show as seams.
+constexpr double kMarginMinCos = 0.5;
+
+void dropSteepMargin(const WorkCell& c, const TileGrid& g, TileOutput& tile) {
+  double frame[3];
+  for (size_t t = 0; t < tile.heights.size(); ++t) {
+    if (!tile.heights[t]) continue;
+    const int i = static_cast<int>(t % size_t(g.width)), j = static_cast<int>(t / size_t(g.width));
+    const double u = g.u0 + (i + 0.5) * g.du, v = g.v0 + (j + 0.5) * g.dv;
+    if (u >= c.ext[0] && u <= c.ext[1] && v >= c.ext[2] && v <= c.ext[3]) continue;
+    decodeNormal(&tile.normals[kNormalBytes * t], frame);
+    const double nw = frame[0] * g.frame[6] + frame[1] * g.frame[7] + frame[2] * g.frame[8];
+    if (nw < kMarginMinCos) {
+      tile.heights[t] = 0;
+      --tile.covered;
+    }
+  }
 }
 
 // One cell's tile from its points (in the rewritten chunk: smoothed, with normals) and the
@@ -592,6 +620,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::
   r.box[5] = tile.wMax;
   writer.setCellHeights(id, tile.wMin, tile.wMax);
   fieldNormals(r, g, margins, job.opt.splatRadius * job.sum.spacing * kFieldScale, tile);
+  dropSteepMargin(c, g, tile);
 }
 
 // ---- pass B, one chunk: every cell's tile ----

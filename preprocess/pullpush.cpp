@@ -277,7 +277,7 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
       }
   out.heights.assign(size_t(W) * H, 0);
   out.rgba.assign(ch.color >= 0 ? size_t(W) * H * 4 : 0, 0);
-  out.normals.assign(ch.normal >= 0 ? size_t(W) * H * 2 : 0, 0);
+  out.normals.assign(ch.normal >= 0 ? size_t(W) * H * kNormalBytes : 0, 0);
   out.covered = 0;
   for (size_t t = 0; t < out.heights.size(); ++t) {
     if (!covered[t]) continue;
@@ -292,16 +292,17 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
       const double f[3] = {a[ch.normal], a[ch.normal + 1], a[ch.normal + 2]};
       double w[3];
       g.toWorld(f, w);
-      encodeNormal(w[0], w[1], w[2], &out.normals[2 * t]);
+      encodeNormal(w[0], w[1], w[2], &out.normals[kNormalBytes * t]);
     }
   }
 }
 
 void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, double minCos,
-                   bool normals, TileOutput& out) {
+                   const float* vertexNormals, TileOutput& out) {
   const int W = g.width, H = g.height;
   std::vector<double> best(size_t(W) * H, -INFINITY);
   std::vector<uint32_t> winner(best.size(), UINT32_MAX);
+  std::vector<float> bary(vertexNormals ? 2 * best.size() : 0);
   // Pass 0: texels whose centre lies inside a triangle, exactly. Pass 1: the texels a triangle
   // touches within half a texel diagonal but whose centre no triangle holds, from the plane of
   // the triangle continued there: coverage then has no sub-texel gaps along the edge of the
@@ -335,6 +336,10 @@ void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, 
         if (wz > best[k]) {
           best[k] = wz;
           winner[k] = static_cast<uint32_t>(t);
+          if (vertexNormals) {
+            bary[2 * k] = float(b0);
+            bary[2 * k + 1] = float(b1);
+          }
         }
       }, pass == 0 ? 0.0 : 0.7072);
     }
@@ -343,21 +348,21 @@ void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, 
   out.wMin = g.wMin;
   out.wMax = g.wMax;
   out.rgba.clear();
-  out.normals.assign(normals ? size_t(W) * H * 2 : 0, 0);
+  out.normals.assign(vertexNormals ? size_t(W) * H * kNormalBytes : 0, 0);
   out.covered = 0;
   for (size_t t = 0; t < best.size(); ++t) {
     if (best[t] == -INFINITY) continue;
     out.heights[t] = encodeHeight(best[t], g.wMin, g.wMax);
     ++out.covered;
-    if (normals) {
-      // The face normal of the visible triangle: the mesh's own facet, as the reference
-      // renders it.
-      const double* p = tris + 9 * size_t(winner[t]);
-      const Eigen::Vector3d a(p[0], p[1], p[2]), b(p[3], p[4], p[5]), c(p[6], p[7], p[8]);
-      const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
-      double w[3];
-      g.toWorld(n.data(), w);
-      encodeNormal(w[0], w[1], w[2], &out.normals[2 * t]);
+    if (vertexNormals) {
+      // The mesh's vertex normals interpolated over the visible triangle (barycentrics clamped
+      // to it past its edges): a smooth field, the same wherever two cells hold the triangle.
+      const float* vn = vertexNormals + 9 * size_t(winner[t]);
+      double b[3] = {std::max(0.f, bary[2 * t]), std::max(0.f, bary[2 * t + 1]), std::max(0.f, 1 - bary[2 * t] - bary[2 * t + 1])};
+      const double sum = b[0] + b[1] + b[2];
+      Eigen::Vector3d n = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) n += b[k] / sum * Eigen::Vector3d(vn[3 * k], vn[3 * k + 1], vn[3 * k + 2]);
+      encodeNormal(n.x(), n.y(), n.z(), &out.normals[kNormalBytes * t]);
     }
   }
 }

@@ -26,7 +26,7 @@ struct TileGrid {
 struct TileOutput {
   std::vector<uint16_t> heights;  // width * height; 0 = not covered
   double wMin = 0, wMax = 0;      // the height range the heights encode
-  std::vector<uint8_t> normals;   // width * height * 2 (encodeNormal, world) when normals were given
+  std::vector<uint8_t> normals;   // width * height * kNormalBytes (encodeNormal, world) when normals were given
   std::vector<uint8_t> rgba;      // width * height * 4 when colours were given
   size_t covered = 0;
 };
@@ -63,8 +63,9 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
 // Triangles in frame coordinates (9 doubles each: u, v, w per vertex). Triangles facing +W
 // (counter-clockwise seen from +W) with a face normal whose W component is over minCos are
 // rasterized, keeping the largest w per texel (the surface seen from the +W side) within
-// [wMin - slack, wMax + slack]; with `normals`, the encoded face normal of that triangle per texel.
+// [wMin - slack, wMax + slack]. vertexNormals (may be null): 9 floats per triangle, its vertices'
+// unit normals in world coordinates, interpolated into the texels' stored normals.
 void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, double minCos,
-                   bool normals, TileOutput& out);
+                   const float* vertexNormals, TileOutput& out);
 
 }  // namespace sa

@@ -231,10 +231,10 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
     glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
     return t;
   };
-  const uint8_t white[4] = {255, 255, 255, 255}, up[2] = {128, 128};
+  const uint8_t white[4] = {255, 255, 255, 255}, up[2] = {128, 128};  // a lone texel: unsampled without pages
   g.heightTex = pages(GL_R16UI, true, nullptr, 0, 2);
   g.pageColorTex = pages(GL_RGBA8, hasColor_, white, GL_RGBA, 4);
-  g.normalTex = pages(GL_RG8, hasNormals_, up, GL_RG, 2);
+  g.normalTex = pages(kNormalBytes == 2 ? GL_RG8 : GL_RG16, hasNormals_, up, GL_RG, kNormalBytes);
   g.pack = &pack;
   g.resident.assign(m.pageCount, 0);
   g.nextPage = 0;
@@ -252,7 +252,7 @@ void Renderer::uploadPages(uint64_t budgetBytes) {
   if (!g.pack) return;
   const PackMeta& m = g.pack->meta();
   const GLsizei PW = GLsizei(m.pageWidth), PH = GLsizei(m.pageHeight);
-  const uint64_t pageBytes = g.pack->pageTexels() * (2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? 2 : 0));
+  const uint64_t pageBytes = g.pack->pageTexels() * (2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0));
   uint64_t spent = 0;
   // At least one page per call, then as many as the budget allows.
   while (g.nextPage < m.pageCount && (spent == 0 || spent + pageBytes <= budgetBytes)) {
@@ -261,9 +261,8 @@ void Renderer::uploadPages(uint64_t budgetBytes) {
     if (hasColor_)
       glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RGBA, GL_UNSIGNED_BYTE, g.pack->colorPage(p));
     if (hasNormals_) {
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 2);
-      glTextureSubImage3D(g.normalTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RG, GL_UNSIGNED_BYTE, g.pack->normalPage(p));
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+      glTextureSubImage3D(g.normalTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RG, kNormalBytes == 2 ? GL_UNSIGNED_BYTE : GL_UNSIGNED_SHORT,
+                          g.pack->normalPage(p));
     }
     g.resident[p] = 1;
     spent += pageBytes;

@@ -101,7 +101,7 @@ SmallPack makePack(bool color, uint32_t pageWidth = 512, uint32_t pageHeight = 5
     std::vector<uint8_t> col(h.size() * 4);
     for (auto& v : col) v = uint8_t(rng());
     sp.rgba.push_back(col);
-    std::vector<uint8_t> nrm(h.size() * 2);
+    std::vector<uint8_t> nrm(h.size() * kNormalBytes);
     for (auto& v : nrm) v = uint8_t(rng());
     sp.normals.push_back(nrm);
   }
@@ -133,7 +133,7 @@ TEST(PackFile, RoundTripsBitExactlyWithGutters) {
           // Interior texels exact; gutter texels repeat the nearest edge texel.
           const int sj = std::clamp(j, 0, int(c.tileH) - 1), sk = std::clamp(k, 0, int(c.tileW) - 1);
           ASSERT_EQ(r.texel(c, k, j), sp.heights[i][size_t(sj) * c.tileW + sk]) << "cell " << i << " " << k << "," << j;
-          ASSERT_EQ(std::memcmp(r.normalTexel(c, k, j), &sp.normals[i][(size_t(sj) * c.tileW + sk) * 2], 2), 0);
+          ASSERT_EQ(std::memcmp(r.normalTexel(c, k, j), &sp.normals[i][(size_t(sj) * c.tileW + sk) * kNormalBytes], kNormalBytes), 0);
           if (color) {
             const uint8_t* page = r.colorPage(c.page);
             const size_t t = (size_t(c.tileY + j) * r.meta().pageWidth + c.tileX + k) * 4;

@@ -132,7 +132,7 @@ TEST(Raster, TriangleHeightsAreExact) {
   auto plane = [](double u, double v) { return 0.03 * u - 0.02 * v + 0.01; };
   const double tri[9] = {-0.9, -0.9, plane(-0.9, -0.9), 0.9, -0.9, plane(0.9, -0.9), -0.9, 0.9, plane(-0.9, 0.9)};
   TileOutput out;
-  rasterizeTile(g, tri, 1, 0.01, 0.0, false, out);
+  rasterizeTile(g, tri, 1, 0.01, 0.0, nullptr, out);
   size_t covered = 0;
   for (int j = 0; j < g.height; ++j)
     for (int i = 0; i < g.width; ++i) {

@@ -16,7 +16,7 @@ layout(std430, binding = 0) readonly buffer Cells { Cell cells[]; };
 
 layout(binding = 0) uniform usampler2DArray heightPages;  // R16UI, 0 = not covered
 layout(binding = 1) uniform sampler2DArray colorPages;    // RGBA8
-layout(binding = 2) uniform sampler2DArray normalPages;   // RG8: octahedral world normal
+layout(binding = 2) uniform sampler2DArray normalPages;   // RG16 unorm: octahedral world normal
 uniform bool storedNormals;                               // the pack has normal pages (FORMAT.md)
 
 // Camera position relative to the pack origin, split into high and low float parts, so
@@ -44,9 +44,9 @@ vec2 texelCoord(Cell c, vec2 uv) {
   return (uv - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * size - 0.5;
 }
 
-// Stored normal of texel (i, j), world coordinates (FORMAT.md: octahedral, two bytes).
+// Stored normal of texel (i, j), world coordinates (FORMAT.md: octahedral).
 vec3 texelNormal(Cell c, ivec2 ij) {
-  vec2 p = texelFetch(normalPages, ivec3(c.tile.yz + ij, c.tile.x), 0).rg * (255.0 / 127.5) - 1.0;
+  vec2 p = texelFetch(normalPages, ivec3(c.tile.yz + ij, c.tile.x), 0).rg * 2.0 - 1.0;
   float z = 1.0 - abs(p.x) - abs(p.y);
   vec2 xy = z < 0.0 ? (1.0 - abs(p.yx)) * vec2(p.x < 0.0 ? -1.0 : 1.0, p.y < 0.0 ? -1.0 : 1.0) : p;
   return normalize(vec3(xy, z));
