@@ -35,7 +35,7 @@ const char* kHelp =
     "  --frames N             timed frames per configuration (default 200)\n"
     "  --mode LIST            parallax, points (the source points as splats; reads the pack's\n"
     "                         source files) (default parallax)\n"
-    "  --iterations LIST      ray-march step bounds for parallax (default 12)\n"
+    "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
     "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"

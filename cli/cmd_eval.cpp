@@ -56,7 +56,7 @@ const char* kHelp =
     "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render (up\n"
     "                         defaults to the pack's up axis)\n"
     "  --mode LIST            parallax, points (default parallax)\n"
-    "  --iterations LIST      parallax step bounds (default 12)\n"
+    "  --iterations LIST      parallax step bounds (default 64)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
     "                         view; default 3)\n"
     "  --csv FILE             one row per view and configuration plus 'all' summary rows\n"

@@ -35,7 +35,7 @@ const char* kHelp =
     "  -o, --output FILE      the image to write: .png, or .jpg (JPEG, quality 92)\n"
     "  --depth-out FILE.pfm   also write float32 linear view depth (distance along the camera's\n"
     "                         forward axis, world units; inf where nothing was hit)\n"
-    "  --iterations N         linear ray-march steps per height field (default 12)\n"
+    "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
     "  --shading MODE         lambert (head light, default), normals, height (colour ramp along --up),\n"

@@ -21,7 +21,7 @@ Status modesAndIterations(const Args& a, std::vector<RenderMode>& modes, std::ve
     if (!r) return r.status();
     modes.push_back(*r);
   }
-  for (const auto& t : splitList(a.get("iterations", "12"))) {
+  for (const auto& t : splitList(a.get("iterations", std::to_string(kDefaultIterations)))) {
     auto r = parseInt("iterations", t, 1, 1024);
     if (!r) return r.status();
     iterations.push_back(int(*r));

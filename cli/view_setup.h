@@ -15,7 +15,7 @@ namespace sa {
 Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, int defaultSize,
                        std::vector<Camera>& out);
 std::vector<std::string> splitList(const std::string& s);
-// --mode LIST (default parallax) and --iterations LIST (default 12), as bench and eval take them.
+// --mode LIST (default parallax) and --iterations LIST (default kDefaultIterations), as bench and eval take them.
 Status modesAndIterations(const Args& a, std::vector<RenderMode>& modes, std::vector<int>& iterations);
 // --opt with exactly `count` comma-separated numbers.
 Status numberList(const Args& a, const std::string& opt, size_t count, std::vector<double>& out);

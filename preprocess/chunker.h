@@ -94,6 +94,7 @@ struct DistributeResult {
   // area-weighted normals, indexed by vertex id.
   std::vector<double> vertexPos;
   std::vector<float> vertexNormal;
+  std::vector<float> vertexCone;  // vertexNormalCones (triangle_cells.h), filled by the pipeline
 };
 
 // Pass 2: writes chunk files into options.scratchDir.

@@ -16,7 +16,7 @@ Eigen::Vector3d anyPerpendicular(const Eigen::Vector3d& a) {
 }  // namespace
 
 PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size_t n, double cosMax,
-                  double outlierFraction) {
+                  double outlierFraction, const float* cone) {
   PlaneFit f;
   if (n == 0) return f;
   // Centroid and covariance relative to the first point (no cancellation at large offsets).
@@ -66,7 +66,8 @@ PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size
     const float* q = &nrm[3 * size_t(idx[i])];
     const double len2 = double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2];
     if (!(len2 > 0.25)) continue;
-    const double c = (f.w.x() * q[0] + f.w.y() * q[1] + f.w.z() * q[2]) / std::sqrt(len2);
+    double c = (f.w.x() * q[0] + f.w.y() * q[1] + f.w.z() * q[2]) / std::sqrt(len2);
+    if (cone && cone[idx[i]] > 0) c = std::cos(std::min(M_PI, std::acos(std::clamp(c, -1.0, 1.0)) + cone[idx[i]]));
     f.minCos = std::min(f.minCos, c);
     if (c < cosMax) ++f.violations;
   }
@@ -100,16 +101,18 @@ uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, cons
 
 void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
                  const Eigen::Vector3d& rootMin, double rootSize, int rootLevel, const OctreeParams& params,
-                 std::vector<OctreeCell>& out) {
+                 std::vector<OctreeCell>& out, const float* cone) {
   const double cosMax = std::cos(params.maxAngleDeg * M_PI / 180.0);
+  const double outliers = params.outlierFraction < 0 ? kPointOutlierFraction : params.outlierFraction;
+  const uint32_t minSplit = params.minSplitPoints ? params.minSplitPoints : kPointMinSplit;
   struct Item { uint32_t first, count; int level; Eigen::Vector3d min; double size; };
   std::vector<Item> stack{{0, static_cast<uint32_t>(idx.size()), rootLevel, rootMin, rootSize}};
   while (!stack.empty()) {
     Item it = stack.back();
     stack.pop_back();
     if (it.count == 0) continue;
-    PlaneFit fit = fitPlane(pos, nrm, idx.data() + it.first, it.count, cosMax, params.outlierFraction);
-    const bool canSplit = it.level < params.maxDepth && it.count >= params.minSplitPoints;
+    PlaneFit fit = fitPlane(pos, nrm, idx.data() + it.first, it.count, cosMax, outliers, cone);
+    const bool canSplit = it.level < params.maxDepth && it.count >= minSplit;
     if (fit.heightField &&
         countLayeredBins(pos, idx.data() + it.first, it.count, fit, params.layerBin, params.layerGap,
                          params.layeredBins) >= params.layeredBins) {

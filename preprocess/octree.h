@@ -9,13 +9,23 @@
 
 namespace sa {
 
+inline constexpr double kPointOutlierFraction = 0.01;
+inline constexpr uint32_t kPointMinSplit = 32, kMeshMinSplit = 4;
+
 struct OctreeParams {
   int maxDepth = 10;          // global octree level limit (0 = the root cube)
   double maxAngleDeg = 85.0;  // largest angle allowed between a normal and W (paper: 90)
-  uint32_t minSplitPoints = 32;  // cells with fewer points are never split (kept, flagged forced)
+  // Cells with fewer points are never split (kept, flagged forced). 0 = by input (the pack
+  // pipeline): kPointMinSplit for points (normals from 24 neighbours: smaller cells know nothing
+  // more), kMeshMinSplit for meshes (a thin fin of a few vertices whose faces fail the test must
+  // split, or one of its faces has no cell and leaves a hole).
+  uint32_t minSplitPoints = 0;
   // Fraction of a cell's points whose normal may fail the test (estimated normals of merged,
   // slightly misaligned scans are noisy; a strict test then splits flat regions for nothing).
-  double outlierFraction = 0.01;
+  // Negative = by input (the pack pipeline): 0 for meshes (exact normals: the few vertices that
+  // fail are a fold, such as the underside of a dragon's scale over the next one), else
+  // kPointOutlierFraction.
+  double outlierFraction = -1;
   // The layer test (0 = off): over the best-fit plane, in square bins of side layerBin, a bin
   // whose points' heights leave a gap wider than layerGap is layered (canopy over ground, a
   // deck over water); a cell with layeredBins or more such bins is not a height field,
@@ -37,8 +47,11 @@ struct PlaneFit {
 // PCA plane of the points idx[0..n) (positions xyz-interleaved, normals likewise; a normal
 // of zero length counts as unknown) and the height-field test. Never produces NaN: single
 // points, duplicates and collinear sets fall back to a frame built from the mean normal.
+// cone (may be null): per point, the half-angle (radians) of a cone about its normal holding
+// every direction the test must pass (a mesh vertex's incident faces): a point passes when
+// its normal's angle to W plus its cone is within acos(cosMax).
 PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size_t n, double cosMax,
-                  double outlierFraction = 0);
+                  double outlierFraction = 0, const float* cone = nullptr);
 
 // Number of layered bins (see OctreeParams::layerBin), counting up to `enough`.
 uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, const PlaneFit& fit, double bin,
@@ -55,8 +68,9 @@ struct OctreeCell {
 
 // Subdivides the cube (cubeMin, cubeSize, at octree level `level`) holding points idx.
 // Permutes idx so every emitted cell's points are contiguous; appends cells to `out`.
+// cone: as fitPlane's (may be null).
 void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
                  const Eigen::Vector3d& cubeMin, double cubeSize, int level, const OctreeParams& params,
-                 std::vector<OctreeCell>& out);
+                 std::vector<OctreeCell>& out, const float* cone = nullptr);
 
 }  // namespace sa

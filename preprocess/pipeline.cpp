@@ -139,6 +139,8 @@ Status distributePhase(PackJob& job, const std::string& outPath) {
   job.sum.seconds[1] = secondsSince(t0);
   if (job.triangles && job.dist.triangles == 0)
     return Status::badInput(job.input.files()[0].path + ": face element holds no triangles; use --as-points");
+  if (job.triangles)
+    SA_RETURN_IF_ERROR(vertexNormalCones(job.dist.trianglePath, job.dist.vertexPos, job.dist.vertexNormal, job.dist.vertexCone));
   return Status::ok();
 }
 
@@ -272,14 +274,22 @@ Status chunkCells(PackJob& job, uint32_t ci) {
   nodeCube(job.qz, ch.level, ch.ix, ch.iy, ch.iz, cmin, csize);
   OctreeParams op = job.opt.octree;
   op.maxDepth = std::max(op.maxDepth, ch.level);
+  if (op.outlierFraction < 0) op.outlierFraction = job.triangles ? 0.0 : kPointOutlierFraction;
+  if (op.minSplitPoints == 0) op.minSplitPoints = job.triangles ? kMeshMinSplit : kPointMinSplit;
   if (sp > 0 && op.layerGap == 0) {
     // Layers farther apart than twice the coverage radius would leave the surface between
     // them uncovered: such a cell is not one height field.
     op.layerBin = 2 * sp;
     op.layerGap = 2 * job.opt.coverageRadius * sp;
   }
+  std::vector<float> cone;  // mesh vertices: the test holds for every face around them
+  if (job.triangles) {
+    cone.assign(n, 0.f);
+    for (size_t i = 0; i < n; ++i)
+      if (!(pts[i].flags & kChunkSurfaceSample) && pts[i].vid < job.dist.vertexCone.size()) cone[i] = job.dist.vertexCone[pts[i].vid];
+  }
   std::vector<OctreeCell> oc;
-  buildOctree(pos.data(), nrm.data(), idx, cmin, csize, ch.level, op, oc);
+  buildOctree(pos.data(), nrm.data(), idx, cmin, csize, ch.level, op, oc, cone.empty() ? nullptr : cone.data());
   // Rewrite the chunk in cell order with its normals and (smoothed) positions, for pass B.
   std::vector<ChunkPoint> sorted(n);
   for (size_t i = 0; i < n; ++i) {

@@ -19,6 +19,32 @@ void grow(CellExtent& c, const Eigen::Vector3d& p) {
 
 }  // namespace
 
+Status vertexNormalCones(const std::string& trianglePath, const std::vector<double>& P,
+                         const std::vector<float>& vertexNormal, std::vector<float>& cone) {
+  std::FILE* f = std::fopen(trianglePath.c_str(), "rb");
+  if (!f) return Status::internal(trianglePath + ": cannot reopen");
+  cone.assign(P.size() / 3, 0.f);
+  std::vector<uint32_t> buf(3 * 65536);
+  size_t got;
+  while ((got = std::fread(buf.data(), 12, buf.size() / 3, f)) > 0) {
+    for (size_t k = 0; k < got; ++k) {
+      const uint32_t* v = &buf[3 * k];
+      if (3 * size_t(std::max({v[0], v[1], v[2]})) + 2 >= std::min(P.size(), vertexNormal.size())) continue;
+      const Eigen::Vector3d a(&P[3 * size_t(v[0])]), b(&P[3 * size_t(v[1])]), c(&P[3 * size_t(v[2])]);
+      const Eigen::Vector3d fn = (b - a).cross(c - a);
+      if (!(fn.norm() > 0)) continue;
+      for (int j = 0; j < 3; ++j) {
+        const Eigen::Vector3d n = Eigen::Vector3f(&vertexNormal[3 * size_t(v[j])]).cast<double>();
+        if (!(n.norm() > 0)) continue;
+        const double angle = std::acos(std::clamp(n.dot(fn) / (n.norm() * fn.norm()), -1.0, 1.0));
+        cone[v[j]] = std::max(cone[v[j]], float(angle));
+      }
+    }
+  }
+  std::fclose(f);
+  return Status::ok();
+}
+
 Status assignTrianglesToCells(const TriangleCellInput& in, std::vector<CellExtent>& cells,
                               std::vector<std::pair<uint32_t, uint32_t>>& out) {
   std::FILE* f = std::fopen(in.trianglePath.c_str(), "rb");

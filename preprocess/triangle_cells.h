@@ -34,6 +34,13 @@ struct TriangleCellInput {
   double minCos = 0;
 };
 
+// Per vertex, the largest angle (radians) between its normal (vertexNormal, area-weighted, not
+// necessarily unit) and the faces around it: the octree's height-field test must hold for the
+// faces, not only for their average (a crease's vertex normal can pass where one of its faces
+// faces away from W; then none of the cells of its vertices can hold that face: a hole).
+Status vertexNormalCones(const std::string& trianglePath, const std::vector<double>& vertexPos,
+                         const std::vector<float>& vertexNormal, std::vector<float>& cone);
+
 // Appends (triangle, cell) pairs to out, sorted by triangle; grows cells' extents.
 Status assignTrianglesToCells(const TriangleCellInput& in, std::vector<CellExtent>& cells,
                               std::vector<std::pair<uint32_t, uint32_t>>& out);

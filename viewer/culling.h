@@ -14,13 +14,19 @@
 
 namespace sa {
 
+// The default bound on a fragment's linear ray-march steps (--iterations). A fragment takes
+// one step per 1.5 texels its ray crosses, up to this: at 12 a grazing ray over a 100-texel
+// tile stepped 8 texels at a time over thin ridges (47 of the dragon's 88 pinholes over 32
+// views at 1024x1024); 64 covers a 96-texel crossing, for about 20 % more frame time.
+inline constexpr int kDefaultIterations = 64;
+
 struct CullOptions {
   bool frustum = true;         // drop boxes outside the view frustum
   bool backfaceCull = true;    // rasterize front faces only (back faces where the camera is inside)
   bool adaptiveSteps = true;   // steps from projected size and view angle, bounded by maxSteps
   bool subpixelSplats = true;  // boxes under splatPixels drawn as one splat
   bool frontToBack = true;     // sort boxes by distance
-  int maxSteps = 12;
+  int maxSteps = kDefaultIterations;
   int minSteps = 4;
   double splatPixels = 1.0;
   // Clip box and section plane (relative to the pack origin): boxes wholly outside are culled.

@@ -41,7 +41,7 @@ struct RenderSettings {
   Eigen::Vector3d lightDir = Eigen::Vector3d(0.3, 1, 0.5);
   Eigen::Vector3d up = Eigen::Vector3d::UnitY();  // axis of the height colour ramp
   ClipSettings clip;
-  int iterations = 12;   // linear search steps (the bound when steps are adaptive)
+  int iterations = kDefaultIterations;  // linear search steps (the bound when steps are adaptive)
   int refineSteps = 6;   // bisection steps after the linear search
   bool useColor = true;  // scan colour when the pack has it
   float background[3] = {0.1f, 0.1f, 0.12f};

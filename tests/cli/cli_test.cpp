@@ -145,7 +145,7 @@ TEST(Cli, PackInfoBenchEvalJson) {
   }
   ASSERT_EQ(run("convert " + d.file("ico.ply") + " -o " + d.file("ico.drc") + " --quantization 0 -q").code, 0);
   for (const char* ref : {"ico.obj", "ico.drc"}) {
-    CmdResult r = run("eval " + d.file("ico.hfa") + " --reference " + d.file(ref) + " --orbit 3 --size 96x96 --far --json");
+    CmdResult r = run("eval " + d.file("ico.hfa") + " --reference " + d.file(ref) + " --orbit 3 --size 96x96 --iterations 12 --far --json");
     ASSERT_EQ(r.code, 0) << ref << r.out;
     const auto c = nlohmann::json::parse(r.out)["configs"][0];
     EXPECT_NEAR(c["iou"].get<double>(), par["iou"].get<double>(), 1e-9) << ref;

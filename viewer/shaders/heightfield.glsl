@@ -147,6 +147,7 @@ float coverageEdge(Cell c, vec3 o, vec3 d, float tOut, float tIn) {
 // no hit; leaving it, the crossing may lie just before the edge, so the edge is checked.
 // The stepping loop only finds the next such event; events are resolved outside it, so the
 // bisections do not run inside the loop (SIMD lanes would all pay for them at every step).
+// Up to 16 events: with fine steps a ray can pass several side entries and scan edges first.
 bool marchHeightField(Cell c, vec3 o, vec3 d, float tEnter, float tExit, int steps, int refine, out float tHit) {
   float dt = (tExit - tEnter) / float(steps);
   vec3 p = o + d * tEnter;
@@ -156,7 +157,7 @@ bool marchHeightField(Cell c, vec3 o, vec3 d, float tEnter, float tExit, int ste
   float tLo = 0.0, tHi = 0.0, gLo = 0.0, gHi = 0.0;
   bool found = false;
   int i = 1;
-  for (int events = 0; events < 4 && !found; ++events) {
+  for (int events = 0; events < 16 && !found; ++events) {
     float t = tPrev, g = gPrev;
     bool cov = covPrev, event = false;
     for (; i <= steps; ++i) {
