@@ -90,6 +90,21 @@ UpDecision decideUp(const InputSet& input, const Eigen::Vector3d& given, const E
     }
     return d;
   }
+  // Which way along coordinate axis a is up: the side most of the surface faces (reliable
+  // normals; a closed surface faces every way alike, its area-weighted normals sum to zero),
+  // else the side its heights skew to, else the format's usual default, else the axis as it points.
+  double totalArea = 0;
+  for (const UpCell& c : cells) totalArea += c.area;
+  auto side = [&](int a) {
+    if (reliableNormals) {
+      double facing = 0;
+      for (const UpCell& c : cells) facing += c.area * c.w[a];
+      if (std::abs(facing) > 0.05 * totalArea) return facing < 0 ? -1.0 : 1.0;
+    }
+    if (std::abs(moments.skew(a)) > 0.1) return moments.skew(a) < 0 ? -1.0 : 1.0;
+    if (std::abs(weak[a]) > 0.5) return weak[a] < 0 ? -1.0 : 1.0;
+    return 1.0;
+  };
   // Terrain-like extents (one side under a fifth of the next): the thin axis, on the side most
   // of the surface faces (reliable normals) or its heights skew to.
   const Eigen::Vector3d ext = hi - lo;
@@ -97,14 +112,7 @@ UpDecision decideUp(const InputSet& input, const Eigen::Vector3d& given, const E
   std::sort(axes, axes + 3, [&](int a, int b) { return ext[a] < ext[b]; });
   if (ext[axes[0]] < 0.2 * ext[axes[1]]) {
     Eigen::Vector3d axis = Eigen::Vector3d::Unit(axes[0]);
-    double facing = 0;
-    if (reliableNormals)
-      for (const UpCell& c : cells) facing += c.area * c.w.dot(axis);
-    else if (std::abs(moments.skew(axes[0])) > 0.1)
-      facing = moments.skew(axes[0]);
-    else
-      facing = 1;  // no sign in the data: the axis as it points
-    d.up = facing < 0 ? Eigen::Vector3d(-axis) : axis;
+    d.up = side(axes[0]) * axis;
     d.source = kUpFromData;
     return d;
   }
@@ -116,12 +124,7 @@ UpDecision decideUp(const InputSet& input, const Eigen::Vector3d& given, const E
     const Eigen::Vector3d flat = dominantFlatNormal(cells, axis, 20, kGroundShare, &share);
     if (flat.norm() > 0 && share > bestShare) {
       bestShare = share;
-      double facing = 0;
-      if (reliableNormals)
-        for (const UpCell& c : cells) facing += c.area * c.w.dot(axis);
-      else
-        facing = std::abs(moments.skew(a)) > 0.1 ? moments.skew(a) : 1;
-      d.up = facing < 0 ? Eigen::Vector3d(-axis) : axis;
+      d.up = side(a) * axis;
       d.source = kUpFromData;
     }
   }

@@ -12,7 +12,10 @@ export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 # The Draco regression inputs make libdraco ask for gigabytes in the decoder's child process
 # (which has no address-space limit under ASan): cap single allocations so the child fails fast.
 alloc=max_allocation_size_mb=2048:allocator_may_return_null=1
-# Tests that create a GL context (directly or through the scanatlas binary).
-gl='^(RenderTest|Accuracy|Stress|Cli|Window)\.'
+# Tests that create a GL context (directly or through the scanatlas binary; FarReal is
+# parameterized, so its names start with the instantiation).
+gl='^(RenderTest|Accuracy|Stress|Cli|Window)\.|/FarReal\.'
 ASAN_OPTIONS=detect_leaks=1:$alloc ctest --output-on-failure -j"${JOBS:-2}" -E "$gl"
-ASAN_OPTIONS=detect_leaks=0:$alloc ctest --output-on-failure -j"${JOBS:-2}" -R "$gl"
+# The dragon's 33 views at 1024x1024 measure accuracy, not memory safety (the dragon mesh is
+# packed under the sanitizers by PipelineReal): the Release run covers them.
+ASAN_OPTIONS=detect_leaks=0:$alloc ctest --output-on-failure -j"${JOBS:-2}" -R "$gl" -E 'DragonMeshTrianglePath'
