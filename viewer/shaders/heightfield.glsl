@@ -55,13 +55,14 @@ vec3 texelNormal(Cell c, ivec2 ij) {
 // A world vector in the cell's frame (M1 of §3.2.2 without the translation).
 vec3 toFrame(Cell c, vec3 w) { return vec3(dot(w, c.axisU.xyz), dot(w, c.axisV.xyz), dot(w, c.axisW.xyz)); }
 
-// The height of texel ij where it is uncovered, next to covered texel n: n's tangent plane
-// (its height and stored normal) continued there. Without it a coverage edge is a flat step
-// half a texel wide, which a grazing ray enters from the side and misses.
-float extrapolatedHeight(Cell c, ivec2 n, float hn, ivec2 ij) {
+// The slope of covered texel n's tangent plane (its stored normal) in frame units per
+// texel: continued over an uncovered neighbour ij, hn + dot(slope, ij - n) stands in for its
+// height. Without it a coverage edge is a flat step half a texel wide, which a grazing ray
+// enters from the side and misses.
+vec2 tangentSlope(Cell c, ivec2 n) {
   vec3 nn = toFrame(c, texelNormal(c, n));
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
-  return hn + dot(-nn.xy / max(nn.z, 0.05), vec2(ij - n) * texel);
+  return -nn.xy / max(nn.z, 0.05) * texel;
 }
 
 // Bilinear height at (u, v). Where any of the four texels is uncovered, the nearest texel
@@ -77,13 +78,19 @@ float sampleHeight(Cell c, vec2 uv) {
   float h01 = texelHeight(c, i0 + ivec2(0, 1));
   float h11 = texelHeight(c, i0 + ivec2(1, 1));
   if (min(min(h00, h10), min(h01, h11)) == kUncovered) {
-    ivec2 n = clamp(ivec2(floor(f + 0.5)), ivec2(0), ivec2(size) - 1);
-    float hn = texelHeight(c, n);
+    // The nearest texel (one of the four; at the tile's edge the gutter repeats it).
+    float hn = a.y < 0.5 ? (a.x < 0.5 ? h00 : h10) : (a.x < 0.5 ? h01 : h11);
     if (hn == kUncovered || !storedNormals) return hn;
-    if (h00 == kUncovered) h00 = extrapolatedHeight(c, n, hn, i0);
-    if (h10 == kUncovered) h10 = extrapolatedHeight(c, n, hn, i0 + ivec2(1, 0));
-    if (h01 == kUncovered) h01 = extrapolatedHeight(c, n, hn, i0 + ivec2(0, 1));
-    if (h11 == kUncovered) h11 = extrapolatedHeight(c, n, hn, i0 + ivec2(1, 1));
+    ivec2 n = clamp(ivec2(floor(f + 0.5)), ivec2(0), ivec2(size) - 1);
+    // One normal fetch for all four corners (SIMD lanes that take this branch make the
+    // others wait: it must stay short).
+    vec2 s = tangentSlope(c, n);
+    vec4 e = hn + vec4(dot(s, vec2(i0 - n)), dot(s, vec2(i0 + ivec2(1, 0) - n)), dot(s, vec2(i0 + ivec2(0, 1) - n)),
+                       dot(s, vec2(i0 + ivec2(1, 1) - n)));
+    if (h00 == kUncovered) h00 = e.x;
+    if (h10 == kUncovered) h10 = e.y;
+    if (h01 == kUncovered) h01 = e.z;
+    if (h11 == kUncovered) h11 = e.w;
   }
   return mix(mix(h00, h10, a.x), mix(h01, h11, a.x), a.y);
 }
