@@ -87,6 +87,52 @@ TEST(LasReal, LazIsRefusedWithAHint) {
   EXPECT_NE(s.message().find("laszip"), std::string::npos);
 }
 
+// The "colour that is not colour": autzen with every RGB field set to zero is read and
+// packed without colour (it rendered black on the dark background), and info says why.
+TEST(LasReal, AllZeroRgbIsNoColour) {
+  test::TempDir d;
+  auto bytes = slurp(test::sharedData("lidar/autzen_trim.las"));
+  ASSERT_GT(bytes.size(), 227u);
+  uint32_t offset = 0, count = 0;
+  uint16_t length = 0;
+  std::memcpy(&offset, &bytes[96], 4);
+  std::memcpy(&length, &bytes[105], 2);
+  std::memcpy(&count, &bytes[107], 4);
+  ASSERT_EQ(uint8_t(bytes[104]), 3);  // format 3: RGB at byte 28 of each record
+  for (uint64_t i = 0; i < count; ++i) std::memset(&bytes[offset + i * length + 28], 0, 6);
+  test::writeBytes(d.file("black.las"), bytes);
+  Collect c;
+  LasHeader h;
+  ASSERT_TRUE(readLas(d.file("black.las"), 1 << 15, c, &h).isOk());
+  EXPECT_FALSE(h.hasColor);
+  EXPECT_TRUE(h.colorConstant);
+  EXPECT_EQ(c.maxColor, -1);  // no colour channel delivered
+  auto in = InputSet::open({d.file("black.las")});
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  EXPECT_NE(in->files()[0].detail.find("RGB fields all 0,0,0 (no colour)"), std::string::npos) << in->files()[0].detail;
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, d.file("black.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_FALSE(sum.hasColor);
+}
+
+// A PLY whose colour properties hold one colour for every vertex: no colour, with a warning.
+TEST(Ply, ConstantColourIsNoColour) {
+  test::TempDir d;
+  std::string t = "ply\nformat ascii 1.0\nelement vertex 400\nproperty float x\nproperty float y\nproperty float z\n"
+                  "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+  for (int i = 0; i < 400; ++i)
+    t += std::to_string(i % 20) + " " + std::to_string(i / 20) + " " + std::to_string(0.1 * std::sin(i)) + " 200 30 30\n";
+  test::writeText(d.file("red.ply"), t);
+  auto in = InputSet::open({d.file("red.ply")});
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, d.file("red.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_FALSE(sum.hasColor);
+  bool warned = false;
+  for (const std::string& w : sum.warnings) warned |= w.find("same colour") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
 TEST(Las, TruncatedAndHugeCountsAreRejectedBeforeReading) {
   test::TempDir d;
   auto bytes = slurp(test::sharedData("lidar/autzen_trim.las"));
