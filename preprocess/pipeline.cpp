@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <mutex>
 #include <unordered_map>
@@ -333,6 +334,7 @@ void layoutPhase(PackJob& job) {
   // spacing underestimates where samples come in lines), and at most kMaxTexelsPerPoint texels
   // per point, so sparse or elongated scans stay small. Meshes: from the vertex spacing.
   double t = opt.texelSize > 0 ? opt.texelSize : (job.triangles ? sum.spacing : sum.areaSpacing) * opt.texelPerSpacing;
+  const double wanted = t;
   const uint64_t budget = job.triangles ? opt.texelBudget
                                         : std::min<uint64_t>(opt.texelBudget, std::max<uint64_t>(4096, kMaxTexelsPerPoint * job.bounds.count));
   // Point tiles reach the coverage radius past their points. Triangle tiles hold their
@@ -365,6 +367,15 @@ void layoutPhase(PackJob& job) {
     t *= std::sqrt(double(texels) / double(budget)) * 1.01;
   }
   sum.texelSize = job.texel = t;
+  // A budget that coarsened the texel loses detail: say so, and by how much.
+  if (t > 1.05 * wanted && budget == opt.texelBudget) {
+    char msg[256];
+    std::snprintf(msg, sizeof msg,
+                  "the texel budget (--texels %llu) made texels %.2fx coarser than the data's (%.4g instead of %.4g): "
+                  "detail is lost; raise --texels",
+                  (unsigned long long)opt.texelBudget, t / wanted, t, wanted);
+    sum.warnings.push_back(msg);
+  }
   const PackingResult layout = packAtlas(sizes, opt.maxPageSize);
   job.records.resize(job.cells.size());
   for (size_t i = 0; i < job.cells.size(); ++i) {

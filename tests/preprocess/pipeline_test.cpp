@@ -54,6 +54,18 @@ TEST(Pipeline, SpherePackHasHeightFieldCells) {
       }
   }
   EXPECT_GT(checked, 1000u);
+  auto warnedAboutBudget = [](const PackSummary& s) {
+    for (const std::string& w : s.warnings)
+      if (w.find("texel budget") != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_FALSE(warnedAboutBudget(sum));
+  // A texel budget that cannot hold the data's resolution coarsens the texels and says so.
+  opt.texelBudget = 4096;
+  PackSummary capped;
+  ASSERT_TRUE(packInput(*in, d.file("capped.hfa"), opt, nullptr, capped).isOk());
+  EXPECT_GT(capped.texelSize, 1.5 * sum.texelSize);
+  EXPECT_TRUE(warnedAboutBudget(capped));
 }
 
 TEST(Pipeline, TinyMemoryBudgetGivesSameResultThroughManyChunks) {
