@@ -101,6 +101,31 @@ std::vector<uint8_t> coverage3d(const TileGrid& g, const TileSamples& s, const s
   return covered;
 }
 
+// Closes cracks one texel wide: an uncovered texel whose two neighbours along a row, column or
+// diagonal are covered, where the surface continues between them. Scan rows on a steep flank
+// lie about two coverage radii apart, and their disks leave a thin uncovered line between them:
+// rows of dark dashes in a close-up of merged statue scans. Edges (covered on one side only) and
+// anything wider stay open (two texels wide pushed autzen's pixels beyond 3 spacings from
+// every point from 0.43 % to 0.98 %, one texel to 0.55 %).
+void closeCracks(int W, int H, const std::vector<double>& surface, double tolerance, std::vector<uint8_t>& covered) {
+  const std::vector<uint8_t> before = covered;
+  const int dirs[4][2] = {{1, 0}, {0, 1}, {1, 1}, {1, -1}};
+  auto at = [&](int x, int y) { return x >= 0 && y >= 0 && x < W && y < H && before[size_t(y) * W + x]; };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const size_t t = size_t(y) * W + x;
+      if (before[t] || std::isnan(surface[t])) continue;
+      for (const auto& d : dirs) {
+        if (!at(x - d[0], y - d[1]) || !at(x + d[0], y + d[1])) continue;
+        const double ha = surface[size_t(y - d[1]) * W + (x - d[0])], hb = surface[size_t(y + d[1]) * W + (x + d[0])];
+        if (std::abs(surface[t] - 0.5 * (ha + hb)) <= tolerance) {
+          covered[t] = 1;
+          break;
+        }
+      }
+    }
+}
+
 }  // namespace
 
 namespace {
@@ -266,7 +291,8 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
     const int i = static_cast<int>(t % size_t(W)), j = static_cast<int>(t / size_t(W));
     surface[t] = L.value[t] + trend(g.u0 + (i + 0.5) * g.du, g.v0 + (j + 0.5) * g.dv);
   }
-  const std::vector<uint8_t> covered = coverage3d(g, s, surface, opt.coverageRadius);
+  std::vector<uint8_t> covered = coverage3d(g, s, surface, opt.coverageRadius);
+  closeCracks(W, H, surface, std::max(g.du, g.dv), covered);
   out.wMin = g.wMin;
   out.wMax = g.wMax;
   if (opt.fitHeightRange)

@@ -104,6 +104,43 @@ TEST(PullPush, HolesLargerThanThresholdStayEmpty) {
   }
 }
 
+// Scan rows whose coverage disks leave a crack one texel wide between them (rows 4 texels
+// apart, radius 1.45 texels): the crack is closed (rows of dark dashes in close-ups of merged
+// statue scans). Rows 5 texels apart leave two texels open: they stay open, as does everything
+// past the last row (an edge, covered on one side only).
+TEST(PullPush, OneTexelCracksBetweenRowsCloseWiderGapsAndEdgesStayOpen) {
+  TileGrid g;
+  g.width = g.height = 40;
+  g.u0 = g.v0 = 0;
+  g.du = g.dv = 1;
+  g.wMin = -1;
+  g.wMax = 1;
+  for (const int gap : {4, 5}) {
+    std::vector<double> u, v, w;
+    for (int row = 0; row < 5; ++row)
+      for (int i = 0; i < 160; ++i) {
+        u.push_back(0.125 + 0.25 * i);
+        v.push_back(0.5 + gap * row);
+        w.push_back(0);
+      }
+    TileOutput out;
+    pullPushTile(g, samples(u, v, w), coverageOnly(1.45), out);
+    auto covered = [&](int j) {  // every texel of row j
+      for (int i = 0; i < g.width; ++i)
+        if (out.heights[size_t(j) * g.width + i] == 0) return false;
+      return true;
+    };
+    for (int j = 0; j <= 4 * gap + 1; ++j) {
+      const int offset = j % gap;  // texel row j's distance past the last sample row below it
+      const bool between = offset >= 2 && offset <= gap - 2;
+      if (!between) EXPECT_TRUE(covered(j)) << "gap " << gap << ", texel row " << j;
+      else if (gap == 4) EXPECT_TRUE(covered(j)) << "one-texel crack at texel row " << j << " left open";
+      else EXPECT_FALSE(covered(j)) << "two-texel gap at texel row " << j << " closed";
+    }
+    EXPECT_FALSE(covered(4 * gap + 3)) << "past the last row: an edge";
+  }
+}
+
 TEST(PullPush, ColoursFollowSamples) {
   const TileGrid g = unitGrid(8);
   std::vector<double> u, v, w;
