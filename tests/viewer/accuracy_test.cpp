@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <utility>
 
 #include "../common/test_util.h"
 #include "preprocess/pipeline.h"
@@ -82,6 +83,28 @@ std::vector<Camera> closeUps(const Eigen::Vector3d& lo, const Eigen::Vector3d& h
   return cams;
 }
 
+// A mesh file packed with the default options and ready to render and compare: the pack, the
+// mesh itself as the reference, a GL context and a renderer.
+struct MeshScene {
+  PackSummary sum;
+  PackReader pack;
+  TriangleMesh mesh;
+  EglContext ctx;
+  Renderer r;
+};
+
+void openMeshScene(const std::string& src, const std::string& packPath, MeshScene& s) {
+  auto input = InputSet::open({src});
+  ASSERT_TRUE(input.isOk()) << input.status().message();
+  ASSERT_TRUE(packInput(*input, packPath, PackOptions{}, nullptr, s.sum).isOk());
+  ASSERT_TRUE(s.pack.open(packPath).isOk());
+  auto mesh = loadMesh(src);
+  ASSERT_TRUE(mesh.isOk()) << mesh.status().message();
+  s.mesh = std::move(*mesh);
+  ASSERT_TRUE(s.ctx.init().isOk());
+  ASSERT_TRUE(s.r.init(s.pack).isOk());
+}
+
 // The triangle path: the dragon mesh rasterized into height maps, against the same mesh. A
 // watertight mesh must render with no interior hole from any view: 24 orbit views and 8
 // close-ups at 1024x1024, and the close-up (517 pinholes before the per-vertex cone
@@ -89,20 +112,13 @@ std::vector<Camera> closeUps(const Eigen::Vector3d& lo, const Eigen::Vector3d& h
 TEST(Accuracy, DragonMeshTrianglePathAgainstItself) {
   ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  const std::string src = test::sharedData("stanford_dragon/reconstruction/dragon_vrip.ply");
-  auto input = InputSet::open({src});
-  ASSERT_TRUE(input.isOk()) << input.status().message();
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("d.hfa"), PackOptions{}, nullptr, sum).isOk());
-  EXPECT_TRUE(sum.fromTriangles);
-  PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("d.hfa")).isOk());
-  auto mesh = loadMesh(src);
-  ASSERT_TRUE(mesh.isOk());
-  EglContext ctx;
-  ASSERT_TRUE(ctx.init().isOk());
-  Renderer r;
-  ASSERT_TRUE(r.init(pack).isOk());
+  MeshScene sc;
+  openMeshScene(test::sharedData("stanford_dragon/reconstruction/dragon_vrip.ply"), dir.file("d.hfa"), sc);
+  if (HasFatalFailure()) return;
+  EXPECT_TRUE(sc.sum.fromTriangles);
+  const PackSummary& sum = sc.sum;
+  const TriangleMesh* mesh = &sc.mesh;
+  Renderer& r = sc.r;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
   for (size_t i = 0; i < mesh->positions.size(); i += 3) {
     lo = lo.cwiseMin(Eigen::Vector3d(&mesh->positions[i]));
@@ -137,19 +153,13 @@ TEST(Accuracy, DragonMeshTrianglePathAgainstItself) {
 TEST(Accuracy, IgeaBustHasNoInteriorHoles) {
   ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  const std::string src = test::sharedData("igea/igea.ply");
-  auto input = InputSet::open({src});
-  ASSERT_TRUE(input.isOk()) << input.status().message();
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("igea.hfa"), PackOptions{}, nullptr, sum).isOk());
-  PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("igea.hfa")).isOk());
-  auto mesh = loadMesh(src);
-  ASSERT_TRUE(mesh.isOk());
-  EglContext ctx;
-  ASSERT_TRUE(ctx.init().isOk());
-  Renderer r;
-  ASSERT_TRUE(r.init(pack).isOk());
+  MeshScene sc;
+  openMeshScene(test::sharedData("igea/igea.ply"), dir.file("igea.hfa"), sc);
+  if (HasFatalFailure()) return;
+  const PackSummary& sum = sc.sum;
+  const PackReader& pack = sc.pack;
+  const TriangleMesh* mesh = &sc.mesh;
+  Renderer& r = sc.r;
   const Eigen::Vector3d o(pack.meta().origin);
   const Eigen::Vector3d lo = o + Eigen::Vector3d(pack.meta().boundsMin), hi = o + Eigen::Vector3d(pack.meta().boundsMax);
   auto cams = orbitCameras(lo, hi, 16, pack.viewUp(), 40, 768, 768);
@@ -192,19 +202,13 @@ TEST(Accuracy, CoarseBaseUnderFineDetailIsExact) {
       if (j < nv - 1) f.emplace_back(at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
     }
   writeMeshPly(dir.file("bust.ply"), v, f);
-  auto input = InputSet::open({dir.file("bust.ply")});
-  ASSERT_TRUE(input.isOk()) << input.status().message();
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("bust.hfa"), PackOptions{}, nullptr, sum).isOk());
-  EXPECT_TRUE(sum.fromTriangles);
-  PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("bust.hfa")).isOk());
-  auto mesh = loadMesh(dir.file("bust.ply"));
-  ASSERT_TRUE(mesh.isOk()) << mesh.status().message();
-  EglContext ctx;
-  ASSERT_TRUE(ctx.init().isOk());
-  Renderer r;
-  ASSERT_TRUE(r.init(pack).isOk());
+  MeshScene sc;
+  openMeshScene(dir.file("bust.ply"), dir.file("bust.hfa"), sc);
+  if (HasFatalFailure()) return;
+  EXPECT_TRUE(sc.sum.fromTriangles);
+  const PackSummary& sum = sc.sum;
+  const TriangleMesh* mesh = &sc.mesh;
+  Renderer& r = sc.r;
   const Eigen::Vector3d lo(-1, 0, -1), hi(1, 1.75, 1);
   const double diag = (hi - lo).norm();
   auto cams = orbitCameras(lo, hi, 8, Eigen::Vector3d::UnitY(), 40, 512, 512);
@@ -256,18 +260,11 @@ TEST(Accuracy, OpenSheetSeenFromTheSideHasNoSkirt) {
       f.emplace_back(a + 1, a + n + 1, a + n + 2);
     }
   writeMeshPly(dir.file("sheet.ply"), v, f);
-  auto input = InputSet::open({dir.file("sheet.ply")});
-  ASSERT_TRUE(input.isOk()) << input.status().message();
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("sheet.hfa"), PackOptions{}, nullptr, sum).isOk());
-  PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("sheet.hfa")).isOk());
-  auto mesh = loadMesh(dir.file("sheet.ply"));
-  ASSERT_TRUE(mesh.isOk());
-  EglContext ctx;
-  ASSERT_TRUE(ctx.init().isOk());
-  Renderer r;
-  ASSERT_TRUE(r.init(pack).isOk());
+  MeshScene sc;
+  openMeshScene(dir.file("sheet.ply"), dir.file("sheet.hfa"), sc);
+  if (HasFatalFailure()) return;
+  const TriangleMesh* mesh = &sc.mesh;
+  Renderer& r = sc.r;
   const Eigen::Vector3d lo(0, -0.03, 0), hi(1, 0.03, 1);
   std::vector<Camera> cams;
   for (int k = 0; k < 4; ++k) {
