@@ -6,7 +6,7 @@
 
 namespace sa {
 
-CpuRaycaster::CpuRaycaster(const PackReader& pack) : pack_(pack) {
+CpuRaycaster::CpuRaycaster(const PackReader& pack) : pack_(pack), pyramids_(exact::buildPyramids(pack)) {
   for (const CellRecord& c : pack.cells()) {
     const Eigen::Vector3d O(c.origin), U(c.u), V(c.v), W(c.w);
     const double cu = (c.box[0] + c.box[1]) / 2, cv = (c.box[2] + c.box[3]) / 2, cw = (c.box[4] + c.box[5]) / 2;
@@ -49,65 +49,9 @@ double CpuRaycaster::height(const CellRecord& c, double u, double v) const {
   return (h[0] * (1 - ax) + h[1] * ax) * (1 - ay) + (h[2] * (1 - ax) + h[3] * ax) * ay;
 }
 
-// The shader's rule (marchHeightField in heightfield.glsl) at a quarter texel: a hit is a
-// crossing from above to below inside the covered region; entering it already below is the
-// side of the sheet, not a surface; leaving it, the crossing may lie before the edge.
-bool CpuRaycaster::march(const CellRecord& c, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
-                         double dt, double& tHit) const {
-  auto gap = [&](double t, bool& covered) {
-    const Eigen::Vector3d p = o + d * t;
-    const double h = height(c, p.x(), p.y());
-    covered = !std::isnan(h);
-    return covered ? p.z() - h : 0.0;
-  };
-  auto edge = [&](double tOut, double tIn) {  // a covered t next to the coverage edge
-    for (int k = 0; k < 60; ++k) {
-      const double m = 0.5 * (tOut + tIn);
-      bool cov;
-      gap(m, cov);
-      (cov ? tIn : tOut) = m;
-    }
-    return tIn;
-  };
-  bool covPrev;
-  double tp = t0, gp = gap(t0, covPrev);
-  double lo = 0, hi = 0;
-  bool found = false;
-  for (double t = t0 + dt;; t += dt) {
-    const bool last = t >= t1;
-    if (last) t = t1;
-    bool cov;
-    const double gt = gap(t, cov);
-    if (cov && gt <= 0) {
-      if (covPrev && gp > 0) {
-        lo = tp, hi = t, found = true;
-      } else if (!covPrev) {
-        const double te = edge(tp, t);
-        bool ce;
-        if (gap(te, ce) > 0) lo = te, hi = t, found = true;
-      }
-    } else if (!cov && covPrev && gp > 0) {
-      const double te = edge(t, tp);
-      bool ce;
-      if (gap(te, ce) <= 0) lo = tp, hi = te, found = true;
-    }
-    if (found || last) break;
-    tp = t;
-    gp = gt;
-    covPrev = cov;
-  }
-  if (!found) return false;
-  for (int k = 0; k < 60; ++k) {
-    const double m = 0.5 * (lo + hi);
-    bool cov;
-    const double g = gap(m, cov);
-    (!cov || g > 0 ? lo : hi) = m;
-  }
-  tHit = hi;
-  return true;
-}
+RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd) const { return cast(ro, rd, nullptr); }
 
-RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd) const {
+RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd, exact::TraceStats* stats) const {
   RayHit best;
   best.t = std::numeric_limits<double>::infinity();
   auto cells = pack_.cells();
@@ -133,11 +77,9 @@ RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd) 
       t1 = std::min(t1, tb);
     }
     if (!(t0 < t1)) continue;
-    const double texel = std::min((c.box[1] - c.box[0]) / c.tileW, (c.box[3] - c.box[2]) / c.tileH);
-    const double horiz = std::max(1e-300, std::hypot(d.x(), d.y()));
-    const double dt = std::min((t1 - t0) / 16, 0.25 * texel / horiz);
     double t;
-    if (march(c, o, d, t0, t1, dt, t) && t < best.t) {
+    if (exact::traceCell(pack_, c, pyramids_.codes.data() + pyramids_.offsets[ci], o, d, t0, t1, t, stats) &&
+        t < best.t) {
       best.hit = true;
       best.t = t;
       best.cell = ci;

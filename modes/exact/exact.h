@@ -1,0 +1,66 @@
+// The `exact` mode's core (MODES.md §5; Tevs, Ihrke & Seidel, "Maximum Mipmaps for Fast,
+// Accurate, and Scalable Dynamic Height Field Rendering", I3D 2008), in double precision. GL-free:
+// the bake writes these pyramids into the pack, the CPU reference (CpuRaycaster) traces them,
+// and exact.glsl is the same traversal in float.
+//
+// The surface is the one every mode renders (heightfield.glsl, sampleHeight): between four texel
+// centres a bilinear patch; where one of the four is uncovered the nearest texel decides
+// coverage and the uncovered corners take its tangent plane, so such a patch splits into four
+// quadrant pieces, each a bilinear function of its own. A hit is the first crossing from above to
+// below inside the covered region; entering it below the surface is the sheet's side, not a hit.
+//
+// The pyramid: level 0 has one node per patch ((W+1) x (H+1), the gutter ring included); a
+// node holds the largest height any covered piece of its patch reaches, as a 16-bit height code
+// rounded up (0: nothing covered; 65535: unbounded, never skipped); each level above is the 2x2
+// maximum of the one below (odd sizes round up), up to a single node.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "atlas/pack_file.h"
+
+namespace sa::exact {
+
+inline constexpr uint16_t kNodeEmpty = 0;        // nothing covered under the node
+inline constexpr uint16_t kNodeUnbounded = 65535;  // may reach the box top: always descend
+inline constexpr int kMaxNodeVisits = 1024;      // the traversal's cap (a ray that reaches it is counted)
+
+// Node counts of every level of a tile's pyramid (level 0 first).
+struct Levels {
+  int count = 0;
+  int w[17] = {}, h[17] = {};
+  uint64_t offset[17] = {};  // first node of each level in the tile's code array
+  uint64_t total = 0;
+};
+Levels levelsOf(int tileW, int tileH);
+
+// Appends cell c's pyramid (levelsOf(c.tileW, c.tileH).total codes) to out.
+void buildCellPyramid(const PackReader& pack, const CellRecord& c, std::vector<uint16_t>& out);
+
+// Every cell's pyramid, concatenated in cell order; offsets[i] is cell i's first code.
+struct Pyramids {
+  std::vector<uint64_t> offsets;
+  std::vector<uint16_t> codes;
+  uint64_t bytes() const { return offsets.size() * 8 + codes.size() * 2; }
+};
+Pyramids buildPyramids(const PackReader& pack);
+
+struct TraceStats {
+  uint32_t nodeVisits = 0;   // pyramid nodes looked at (level-0 patches included)
+  uint32_t pieces = 0;       // patch pieces solved exactly
+  bool capped = false;       // stopped at kMaxNodeVisits
+};
+
+// First hit of o + t d (frame coordinates of cell c, d unit or not) over [t0, t1] under the
+// surface rule above, using the cell's pyramid (codes = its first code). Returns false on a miss.
+bool traceCell(const PackReader& pack, const CellRecord& c, const uint16_t* codes, const Eigen::Vector3d& o,
+               const Eigen::Vector3d& d, double t0, double t1, double& tHit, TraceStats* stats = nullptr);
+
+// The same answer without the pyramid: every patch along the ray, in order (tests check the
+// pyramid against it).
+bool traceCellLinear(const PackReader& pack, const CellRecord& c, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                     double t0, double t1, double& tHit);
+
+}  // namespace sa::exact
