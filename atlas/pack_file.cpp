@@ -265,6 +265,49 @@ const uint8_t* PackReader::normalPage(uint32_t page) const {
   return nrml_ ? nrml_ + uint64_t(page) * pageTexels() * kNormalBytes : nullptr;
 }
 
+std::span<const uint8_t> PackReader::section(const char id[4]) const {
+  const SectionEntry* e = find(id);
+  if (!e) return {};
+  return {base_ + e->offset, size_t(e->size)};
+}
+
+Status rewritePackWithSections(const PackReader& in, const std::string& out, const std::vector<ExtraSection>& add) {
+  std::vector<SectionEntry> sec;
+  std::vector<const uint8_t*> src;
+  for (const SectionEntry& e : in.sectionTable()) {
+    bool replaced = false;
+    for (const ExtraSection& a : add) replaced = replaced || std::memcmp(a.id, e.id, 4) == 0;
+    if (replaced) continue;
+    sec.push_back(e);
+    src.push_back(in.base_ + e.offset);
+  }
+  for (const ExtraSection& a : add) {
+    sec.push_back(makeSection(a.id, 0, a.bytes.size(), crcOf(a.bytes.data(), a.bytes.size())));
+    src.push_back(a.bytes.data());
+  }
+  if (sec.size() > 64) return Status::badInput(in.path() + ": a pack holds at most 64 sections");
+  uint64_t off = alignUp(sizeof(PackHeader) + sec.size() * sizeof(SectionEntry)), end = off;
+  for (SectionEntry& e : sec) {
+    e.offset = off;
+    end = off + e.size;
+    off = alignUp(end);
+  }
+  AtomicFile file;
+  SA_RETURN_IF_ERROR(file.open(out));
+  for (size_t i = 0; i < sec.size(); ++i)
+    if (sec[i].size) SA_RETURN_IF_ERROR(file.pwriteAll(src[i], sec[i].size, sec[i].offset));
+  PackHeader h = *in.header_;
+  h.sectionCount = uint32_t(sec.size());
+  h.fileSize = off;
+  h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
+  SA_RETURN_IF_ERROR(file.pwriteAll(&h, sizeof(h), 0));
+  SA_RETURN_IF_ERROR(file.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h)));
+  // The file ends where its last section ends, padded to the alignment.
+  (void)end;
+  if (::ftruncate(file.fd(), off_t(off)) != 0) return Status::internal(out + ": cannot size the file: " + std::strerror(errno));
+  return file.commit();
+}
+
 std::string PackReader::note() const {
   const SectionEntry* n = find("NOTE");
   return n ? std::string(reinterpret_cast<const char*>(base_ + n->offset), n->size) : std::string();

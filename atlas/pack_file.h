@@ -49,6 +49,17 @@ class PackWriter {
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
 };
 
+// An optional section to add to a pack (a mode's bake, FORMAT.md).
+struct ExtraSection {
+  char id[4];
+  std::vector<uint8_t> bytes;
+};
+
+class PackReader;
+// Writes `out` (atomically; it may be the input's own path): every section of `in` except
+// those `add` replaces, then `add`. Nothing else changes, so the pack's hash stays valid.
+Status rewritePackWithSections(const PackReader& in, const std::string& out, const std::vector<ExtraSection>& add);
+
 class PackReader {
  public:
   PackReader() = default;
@@ -77,6 +88,11 @@ class PackReader {
   Eigen::Vector3d viewUp() const { return up().norm() > 0.5 ? Eigen::Vector3d(up().normalized()) : Eigen::Vector3d::UnitY(); }
   uint64_t fileBytes() const { return size_; }
   std::string note() const;
+  // The bytes of an optional section (a mode's, FORMAT.md), empty when the pack has none.
+  std::span<const uint8_t> section(const char id[4]) const;
+  std::vector<SectionEntry> sectionTable() const {
+    return std::vector<SectionEntry>(sections_, sections_ + header_->sectionCount);
+  }
 
   // Height of cell c at texel (i, j) of its tile (0 = uncovered).
   uint16_t texel(const CellRecord& c, int i, int j) const {
@@ -88,6 +104,7 @@ class PackReader {
   }
 
  private:
+  friend Status rewritePackWithSections(const PackReader&, const std::string&, const std::vector<ExtraSection>&);
   const SectionEntry* find(const char id[4]) const;
   std::string path_;
   const uint8_t* base_ = nullptr;

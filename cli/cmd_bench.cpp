@@ -6,6 +6,7 @@
 #include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "modes/registry.h"
 #include "cli/progress.h"
 #include "cli/view_setup.h"
 #include "common/fileio.h"
@@ -33,8 +34,12 @@ const char* kHelp =
     "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and the pack's up axis)\n"
     "  --warmup N             frames rendered before timing each configuration (default 10)\n"
     "  --frames N             timed frames per configuration (default 200)\n"
-    "  --mode LIST            parallax, points (the source points as splats; reads the pack's\n"
-    "                         source files) (default parallax)\n"
+    "  --mode LIST            parallax, exact (max-mipmap traversal; needs 'scanatlas bake PACK\n"
+    "                         --mode exact', else parallax is drawn and said), points (the source\n"
+    "                         points as splats; reads the pack's source files) (default parallax).\n"
+    "                         Per mode: its bytes on the GPU and on disk, bake seconds, and the work\n"
+    "                         per ray (parallax: height samples; exact: pyramid nodes) from one\n"
+    "                         counted pass over the cameras after the timed frames\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
     "  --no-color             ignore scan colours (as eval does)\n"
@@ -81,6 +86,8 @@ struct Row {
   Summary gpu, cpu;
   double drawn = 0, culled = 0, splats = 0, frags = 0, submitted = 0;
   bool invocations = false;
+  WorkCounters work;  // one counted frame per camera, after the timed ones (atomics cost time)
+  RenderMode drawn_mode = RenderMode::kParallax;
 };
 
 Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Config& c, size_t ci, int64_t warmup,
@@ -117,12 +124,22 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
   row.gpu = summarize(gpu);
   row.cpu = summarize(cpu);
   row.invocations = fr.stats.fragmentsAreInvocations;
+  row.drawn_mode = fr.stats.drawnMode;
+  if (c.settings.mode != RenderMode::kPoints) {
+    RenderSettings counted = c.settings;
+    counted.countWork = true;
+    for (const Camera& cam : cams) {
+      SA_RETURN_IF_ERROR(renderer.render(cam, counted, fr, 0u));
+      row.work.add(fr.stats.work);
+    }
+  }
   return Status::ok();
 }
 
-std::string rowJson(const Row& r, const Renderer& renderer) {
+std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pack) {
   const Config& c = r.config;
   const bool points = c.settings.mode == RenderMode::kPoints;
+  const ModeSection ms = modeSection(pack, c.settings.mode);
   std::ostringstream json;
   json << "{\"mode\": \"" << modeName(c.settings.mode) << "\", \"iterations\": " << (points ? 0 : c.settings.iterations)
        << ", \"skips\": \"" << c.skips << "\", \"gpu_ms\": " << summaryJson(r.gpu) << ", \"cpu_ms\": " << summaryJson(r.cpu)
@@ -130,21 +147,30 @@ std::string rowJson(const Row& r, const Renderer& renderer) {
        << ", \"boxes_culled\": " << r.culled << ", \"boxes_drawn\": " << r.drawn << ", \"splats\": " << r.splats
        << ", \"fragments\": " << r.frags << ", \"fragments_are_invocations\": " << (r.invocations ? "true" : "false")
        << ", \"atlas_bytes\": " << renderer.gpuBytes() << ", \"point_bytes\": " << (points ? renderer.pointBytes() : 0)
-       << "}";
+       << ", \"drawn_mode\": \"" << modeName(points ? RenderMode::kPoints : r.drawn_mode) << "\""
+       << ", \"mode_gpu_bytes\": " << renderer.modeGpuBytes(c.settings.mode) << ", \"mode_disk_bytes\": " << ms.bytes
+       << ", \"bake_s\": " << ms.bakeSeconds;
+  if (r.work.valid)
+    json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kExact ? "nodes" : "samples") << "\", \"rays\": " << r.work.rays
+         << ", \"hits\": " << r.work.hits << ", \"mean\": " << r.work.mean() << ", \"p50\": " << r.work.p50 << ", \"p90\": "
+         << r.work.p90 << ", \"p99\": " << r.work.p99 << ", \"max\": " << r.work.max << ", \"capped\": " << r.work.capped << "}";
+  json << "}";
   return json.str();
 }
 
 // The frame time first (cpu: culling through glFinish); the GPU timer after it, with a note
 // where it does not measure the frame (llvmpipe rasterizes after the timer query closes).
 void printTable(const std::vector<Row>& rows, const std::string& renderer) {
-  std::fprintf(stderr, "%-9s %5s %-18s %9s %9s %9s %9s %8s %9s %8s %8s %8s %12s\n", "mode", "iters", "skips", "frame med",
-               "frame p95", "frame p99", "frame min", "fps", "gpu med", "drawn", "culled", "splats", "fragments");
+  std::fprintf(stderr, "%-9s %5s %-18s %9s %9s %9s %9s %8s %9s %8s %8s %8s %12s %10s %8s\n", "mode", "iters", "skips", "frame med",
+               "frame p95", "frame p99", "frame min", "fps", "gpu med", "drawn", "culled", "splats", "fragments", "work/ray", "work p99");
   for (const Row& r : rows) {
     const bool points = r.config.settings.mode == RenderMode::kPoints;
-    std::fprintf(stderr, "%-9s %5s %-18s %9.2f %9.2f %9.2f %9.2f %8.1f %9.2f %8.0f %8.0f %8.0f %12.0f\n",
-                 modeName(r.config.settings.mode), points ? "-" : std::to_string(r.config.settings.iterations).c_str(),
+    const bool exactMode = r.drawn_mode == RenderMode::kExact && !points;
+    std::fprintf(stderr, "%-9s %5s %-18s %9.2f %9.2f %9.2f %9.2f %8.1f %9.2f %8.0f %8.0f %8.0f %12.0f %10.1f %8u\n",
+                 modeName(points ? RenderMode::kPoints : r.drawn_mode),
+                 points || exactMode ? "-" : std::to_string(r.config.settings.iterations).c_str(),
                  r.config.skips.c_str(), r.cpu.median, r.cpu.p95, r.cpu.p99, r.cpu.min, 1000.0 / std::max(r.cpu.median, 1e-9),
-                 r.gpu.median, r.drawn, r.culled, r.splats, r.frags);
+                 r.gpu.median, r.drawn, r.culled, r.splats, r.frags, r.work.mean(), r.work.p99);
   }
   if (renderer.find("llvmpipe") != std::string::npos)
     std::fprintf(stderr, "note: frame = CPU wall time through glFinish, the frame time. On llvmpipe 'gpu med' "
@@ -203,8 +229,10 @@ int cmdBench(int argc, char** argv) {
     }
     for (int it : iters) {
       Config c{base, "all"};
+      c.settings.mode = m;
       c.settings.iterations = it;
       configs.push_back(c);
+      if (m == RenderMode::kExact) break;  // no linear steps: one configuration
     }
   }
   if (a.flag("compare-skips")) {
@@ -232,6 +260,7 @@ int cmdBench(int argc, char** argv) {
   s = renderer.init(pack);
   if (!s) return reportError(s);
   const bool quiet = a.flag("quiet") || a.flag("json");
+  for (RenderMode m : modes) warnIfModeFallsBack(renderer, pack, m);
   if (std::find(modes.begin(), modes.end(), RenderMode::kPoints) != modes.end()) {
     if (!quiet) std::fprintf(stderr, "bench: reading the source points for the points baseline...\n");
     s = uploadSourcePoints(pack, renderer);
@@ -256,7 +285,7 @@ int cmdBench(int argc, char** argv) {
     });
     if (!s) return reportError(s);
     rows.push_back(row);
-    json << (ci ? ", " : "") << rowJson(row, renderer);
+    json << (ci ? ", " : "") << rowJson(row, renderer, pack);
   }
   progress.finish();
   if (!quiet) printTable(rows, ctx.renderer());

@@ -8,6 +8,7 @@
 #include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "modes/registry.h"
 #include "common/fileio.h"
 #include "formats/source.h"
 
@@ -188,7 +189,16 @@ int cmdInfo(int argc, char** argv) {
                 double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)), m.origin[0], m.origin[1],
                 m.origin[2], bmin[0], bmin[1], bmin[2], bmax[0], bmax[1], bmax[2]);
     for (int i = 0; i < 6; ++i) std::printf("%s\"%s\": %.3f", i ? ", " : "", phases[i], m.seconds[i]);
-    std::printf("}}\n");
+    std::printf("}, \"modes\": [");
+    bool firstMode = true;
+    for (const ModeInfo& mi : allModes()) {
+      const ModeSection ms = modeSection(pack, mi.mode);
+      std::printf("%s{\"mode\": \"%s\", \"section\": %s, \"present\": %s, \"bytes\": %llu, \"bake_s\": %.3f}",
+                  firstMode ? "" : ", ", mi.name, mi.sectionId ? ("\"" + std::string(mi.sectionId, 4) + "\"").c_str() : "null",
+                  !ms.needed || ms.present ? "true" : "false", (unsigned long long)ms.bytes, ms.bakeSeconds);
+      firstMode = false;
+    }
+    std::printf("]}\n");
     return 0;
   }
   std::printf("pack      %s (%.2f MiB, format version %u)\n", pack.path().c_str(), pack.fileBytes() / 1048576.0,
@@ -213,6 +223,16 @@ int cmdInfo(int argc, char** argv) {
   for (int i = 0; i < 6; ++i)
     if (i != 4) std::printf(" %s %.2fs", phases[i], m.seconds[i]);
   std::printf("\n");
+  for (const ModeInfo& mi : allModes()) {
+    const ModeSection ms = modeSection(pack, mi.mode);
+    if (!ms.needed) std::printf("mode      %-9s ready (needs nothing baked)\n", mi.name);
+    else if (ms.present)
+      std::printf("mode      %-9s section %.4s, %.2f MiB (%.2f bytes/texel), baked in %.2fs\n", mi.name, mi.sectionId,
+                  double(ms.bytes) / 1048576.0, double(ms.bytes) / double(std::max<uint64_t>(1, tileTexels)), ms.bakeSeconds);
+    else
+      std::printf("mode      %-9s not baked: draws %s (scanatlas bake %s --mode %s)\n", mi.name, mi.fallback,
+                  pack.path().c_str(), mi.name);
+  }
   return 0;
 }
 

@@ -9,7 +9,9 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/progress.h"
+#include "cli/view_setup.h"
 #include "common/fileio.h"
+#include "modes/registry.h"
 #include "preprocess/pipeline.h"
 
 namespace sa {
@@ -64,9 +66,29 @@ const char* kHelp =
     "  --force                repack even if OUT already holds a pack of the same input and options\n"
     "                         (checked by a hash of the input bytes and options, stored in the pack)\n"
     "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
+    "  --modes LIST           also bake what these surface-detail modes need (comma-separated;\n"
+    "                         'exact' stores its maxima, about 2/3 of the heights' bytes); modes\n"
+    "                         that need nothing are accepted and cost nothing. Later: scanatlas bake\n"
     "  --json                 print the summary as JSON on stdout\n"
     "  -q, --quiet            no progress and no summary\n";
 
+
+// Bakes the sections of `modes` the pack at `path` lacks (an up-to-date pack may hold them).
+Status bakeMissingModes(const std::string& path, const std::vector<RenderMode>& modes, bool quiet) {
+  PackReader pack;
+  SA_RETURN_IF_ERROR(pack.open(path));
+  std::vector<RenderMode> missing;
+  for (RenderMode m : modes) {
+    const ModeSection ms = modeSection(pack, m);
+    if (ms.needed && !ms.present && std::find(missing.begin(), missing.end(), m) == missing.end()) missing.push_back(m);
+  }
+  if (missing.empty()) return Status::ok();
+  std::vector<std::string> report;
+  SA_RETURN_IF_ERROR(bakeModes(path, path, missing, report));
+  if (!quiet)
+    for (const std::string& r : report) std::fprintf(stderr, "baked %s\n", r.c_str());
+  return Status::ok();
+}
 
 const char* upSourceName(uint32_t s) {
   const char* names[4] = {"unknown", "given", "the format's convention", "estimated from the data"};
@@ -79,7 +101,7 @@ int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
-                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up"},
+                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes"},
                      {"as-points", "strict", "force", "no-smooth", "json", "quiet", "help"},
                      {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -159,6 +181,12 @@ int cmdPack(int argc, char** argv) {
     if (!(v->norm() > 0)) return reportError(Status::badInput("--up must not be zero"));
     opt.up = v->normalized();
   }
+  std::vector<RenderMode> modes;
+  for (const std::string& m : splitList(a.get("modes"))) {
+    auto r = parseMode(m);
+    if (!r) return reportError(Status::badInput("--modes: " + r.status().message()));
+    modes.push_back(*r);
+  }
   opt.smooth = !a.flag("no-smooth");
   opt.asPoints = a.flag("as-points");
   opt.strict = a.flag("strict");
@@ -179,6 +207,8 @@ int cmdPack(int argc, char** argv) {
   PackSummary sum;
   s = packInput(*input, out, opt, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
   progress.finish();
+  if (!s) return reportError(s);
+  s = bakeMissingModes(out, modes, quiet || a.flag("json"));
   if (!s) return reportError(s);
   for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
     if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());

@@ -35,6 +35,9 @@ const char* kHelp =
     "  -o, --output FILE      the image to write: .png, or .jpg (JPEG, quality 92)\n"
     "  --depth-out FILE.pfm   also write float32 linear view depth (distance along the camera's\n"
     "                         forward axis, world units; inf where nothing was hit)\n"
+    "  --mode MODE            parallax (default: linear search + bisection), exact (max-mipmap\n"
+    "                         traversal with the exact root; needs 'scanatlas bake PACK --mode exact',\n"
+    "                         else parallax is drawn and a warning says so)\n"
     "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
@@ -57,6 +60,12 @@ std::string indexed(const std::string& path, int i) {
 
 // Shading, clipping, march and skip options.
 Status settingsFromArgs(const Args& a, RenderSettings& rs) {
+  if (a.has("mode")) {
+    auto m = parseMode(a.get("mode"));
+    if (!m) return Status::badInput("--mode: " + m.status().message());
+    if (*m == RenderMode::kPoints) return Status::badInput("--mode points: render draws height fields; the points baseline is in bench and eval");
+    rs.mode = *m;
+  }
   if (a.has("iterations")) {
     auto v = parseInt("iterations", a.get("iterations"), 1, 1024);
     if (!v) return v.status();
@@ -141,7 +150,7 @@ int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
-                      "background", "shading", "clip-box", "section"},
+                      "background", "shading", "clip-box", "section", "mode"},
                      {"edl", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -171,6 +180,7 @@ int cmdRender(int argc, char** argv) {
   s = renderer.init(pack);
   if (!s) return reportError(s);
   const bool quiet = a.flag("quiet"), json = a.flag("json");
+  if (!quiet) warnIfModeFallsBack(renderer, pack, rs.mode);
   std::vector<double> times;
   if (json) std::printf("{\"renderer\": \"%s\", \"views\": [", jsonEscape(ctx.renderer()).c_str());
   for (size_t i = 0; i < cams.size(); ++i) {

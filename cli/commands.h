@@ -13,6 +13,7 @@ int cmdEval(int argc, char** argv);
 int cmdView(int argc, char** argv);
 int cmdVerify(int argc, char** argv);
 int cmdConvert(int argc, char** argv);
+int cmdBake(int argc, char** argv);
 int reportError(const Status& s);
 std::string jsonEscape(const std::string& s);
 }  // namespace sa

@@ -1,3 +1,4 @@
+#include <cstdio>
 #include "cli/view_setup.h"
 
 #include <sstream>
@@ -107,6 +108,14 @@ Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, 
   SA_RETURN_IF_ERROR(c.validate());
   out.push_back(c);
   return Status::ok();
+}
+
+void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m) {
+  if (m == RenderMode::kPoints || r.modeReady(m)) return;
+  const ModeInfo& mi = modeInfo(m);
+  std::fprintf(stderr, "scanatlas: warning: %s has no %.4s section for the %s mode; drawing %s instead (bake it: "
+               "scanatlas bake %s --mode %s)\n", pack.path().c_str(), mi.sectionId ? mi.sectionId : "----", mi.name,
+               modeName(r.drawnMode(m)), pack.path().c_str(), mi.name);
 }
 
 }  // namespace sa

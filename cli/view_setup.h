@@ -20,5 +20,7 @@ Status modesAndIterations(const Args& a, std::vector<RenderMode>& modes, std::ve
 // --opt with exactly `count` comma-separated numbers.
 Status numberList(const Args& a, const std::string& opt, size_t count, std::vector<double>& out);
 void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi);
+// Says on stderr when the pack lacks what mode m needs (and what draws instead, and how to bake it).
+void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m);
 
 }  // namespace sa

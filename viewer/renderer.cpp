@@ -1,5 +1,7 @@
 #include "viewer/renderer.h"
 
+#include "modes/exact/exact.h"
+
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 
@@ -16,16 +18,20 @@ namespace {
 #define GL_FRAGMENT_SHADER_INVOCATIONS_ARB 0x82F4
 #endif
 
-// Expands `#include "name"` lines with the embedded files and inserts `defines` after the
-// #version line.
-std::string shaderSource(const std::string& name, const std::string& defines) {
+// Expands `#include "name"` lines with the embedded files (`#include <mode>` with the mode's cast
+// unit, modeUnit) and inserts `defines` after the #version line.
+std::string shaderSource(const std::string& name, const std::string& defines, const std::string& modeUnit) {
   const char* text = embeddedShader(name);
   if (!text) return {};
   std::istringstream in(text);
   std::string line, out;
   bool first = true;
   while (std::getline(in, line)) {
-    if (line.rfind("#include \"", 0) == 0) {
+    if (line.rfind("#include <mode>", 0) == 0) {
+      const char* body = embeddedShader(modeUnit);
+      out += body ? body : "#error missing mode unit " + modeUnit;
+      out += "\n";
+    } else if (line.rfind("#include \"", 0) == 0) {
       const std::string inc = line.substr(10, line.find('"', 10) - 10);
       const char* body = embeddedShader(inc);
       out += body ? body : "#error missing include " + inc;
@@ -39,8 +45,9 @@ std::string shaderSource(const std::string& name, const std::string& defines) {
   return out;
 }
 
-Status compile(GLenum type, const std::string& name, const std::string& defines, GLuint& shader) {
-  const std::string src = shaderSource(name, defines);
+Status compile(GLenum type, const std::string& name, const std::string& defines, const std::string& modeUnit,
+               GLuint& shader) {
+  const std::string src = shaderSource(name, defines, modeUnit);
   if (src.empty()) return Status::internal("shader " + name + " is not embedded");
   shader = glCreateShader(type);
   const char* p = src.c_str();
@@ -56,10 +63,11 @@ Status compile(GLenum type, const std::string& name, const std::string& defines,
   return Status::ok();
 }
 
-Status link(const std::string& vs, const std::string& fs, const std::string& defines, GLuint& program) {
+Status link(const std::string& vs, const std::string& fs, const std::string& defines, GLuint& program,
+            const std::string& modeUnit = "parallax_cast.glsl") {
   GLuint v = 0, f = 0;
-  SA_RETURN_IF_ERROR(compile(GL_VERTEX_SHADER, vs, defines, v));
-  SA_RETURN_IF_ERROR(compile(GL_FRAGMENT_SHADER, fs, defines, f));
+  SA_RETURN_IF_ERROR(compile(GL_VERTEX_SHADER, vs, defines, modeUnit, v));
+  SA_RETURN_IF_ERROR(compile(GL_FRAGMENT_SHADER, fs, defines, modeUnit, f));
   program = glCreateProgram();
   glAttachShader(program, v);
   glAttachShader(program, f);
@@ -99,17 +107,14 @@ bool hasExtension(const char* name) {
 
 }  // namespace
 
-const char* modeName(RenderMode m) { return m == RenderMode::kPoints ? "points" : "parallax"; }
-
-Result<RenderMode> parseMode(const std::string& name) {
-  if (name == "parallax") return RenderMode::kParallax;
-  if (name == "points") return RenderMode::kPoints;
-  return Status::badInput("unknown mode '" + name + "' (modes: parallax, points)");
-}
 
 struct Renderer::Gl {
-  GLuint front = 0, inside = 0, splat = 0, points = 0, edl = 0, boxes = 0;  // programs
+  // Per surface mode (indexed by RenderMode): programs for boxes the camera is outside of
+  // (front faces) and inside of (back faces); 0 where the mode cannot draw this pack.
+  GLuint front[3] = {}, inside[3] = {};
+  GLuint splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
+  GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
   const PackReader* pack = nullptr;   // for streamed pages
@@ -132,8 +137,13 @@ struct Renderer::Gl {
   GLint ssboAlign = 256;  // GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT
   int fbW = 0, fbH = 0;
   ~Gl() {
-    for (GLuint p : {front, inside, splat, points, edl, boxes})
+    for (GLuint p : {splat, points, edl, boxes})
       if (p) glDeleteProgram(p);
+    for (int m = 0; m < 3; ++m)
+      for (GLuint p : {front[m], inside[m]})
+        if (p) glDeleteProgram(p);
+    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf};
+    glDeleteBuffers(3, modeBufs);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -165,8 +175,7 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   hasNormals_ = pack.hasNormals();
   spacing_ = m.sampleSpacing;
   culler_ = std::make_unique<CellCuller>(pack.cells());
-  SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n", g.front));
-  SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "", g.inside));
+  SA_RETURN_IF_ERROR(initModes(pack));
   SA_RETURN_IF_ERROR(link("splat.vert", "splat.frag", "", g.splat));
   SA_RETURN_IF_ERROR(link("points.vert", "points.frag", "", g.points));
   SA_RETURN_IF_ERROR(link("fullscreen.vert", "edl.frag", "", g.edl));
@@ -245,6 +254,87 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
     if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   }
   return Status::ok();
+}
+
+// Every surface mode this pack can draw: its programs and its baked sections on the GPU.
+Status Renderer::initModes(const PackReader& pack) {
+  Gl& g = *gl_;
+  for (const ModeInfo& mi : allModes()) {
+    if (!mi.castUnit) continue;
+    if (mi.mode == RenderMode::kExact) {
+      auto v = exact::readSection(pack);
+      if (!v.isOk()) return v.status();
+      if (!v->present) continue;  // drawn as its fallback (drawnMode)
+      if (v->codeCount >= (uint64_t(1) << 32))
+        return Status::badInput(pack.path() + ": the exact mode's maxima exceed 2^32 codes; render with --mode parallax");
+      std::vector<uint32_t> offsets(pack.cells().size());
+      for (size_t i = 0; i < offsets.size(); ++i) offsets[i] = uint32_t(v->offsets[i]);
+      const uint64_t words = (v->codeCount + 1) / 2;
+      glCreateBuffers(1, &g.mipBuf);
+      glNamedBufferStorage(g.mipBuf, GLsizeiptr(std::max<uint64_t>(words, 1) * 4), nullptr, GL_DYNAMIC_STORAGE_BIT);
+      if (v->codeCount) glNamedBufferSubData(g.mipBuf, 0, GLsizeiptr(v->codeCount * 2), v->codes);
+      glCreateBuffers(1, &g.mipOffBuf);
+      glNamedBufferStorage(g.mipOffBuf, GLsizeiptr(std::max<size_t>(offsets.size(), 1) * 4), offsets.empty() ? nullptr : offsets.data(), 0);
+      exactBytes_ = words * 4 + offsets.size() * 4;
+      gpuBytes_ += exactBytes_;
+    }
+    const int k = int(mi.mode);
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n", g.front[k], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "", g.inside[k], mi.castUnit));
+  }
+  glCreateBuffers(1, &g.counterBuf);
+  glNamedBufferStorage(g.counterBuf, (8 + 256) * 4, nullptr, GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+  return Status::ok();
+}
+
+bool Renderer::modeReady(RenderMode m) const {
+  if (m == RenderMode::kPoints) return hasPoints();
+  return gl_ && gl_->front[int(m)] != 0;
+}
+
+RenderMode Renderer::drawnMode(RenderMode m) const {
+  if (m == RenderMode::kPoints || modeReady(m)) return m;
+  return RenderMode::kParallax;
+}
+
+uint64_t Renderer::modeGpuBytes(RenderMode m) const { return m == RenderMode::kExact ? exactBytes_ : 0; }
+
+void WorkCounters::percentiles() {
+  auto pct = [&](double q) {
+    const uint64_t want = uint64_t(std::ceil(q * double(rays)));
+    uint64_t seen = 0;
+    for (uint32_t k = 0; k < histogram.size(); ++k)
+      if ((seen += histogram[k]) >= want && want > 0) return k;
+    return 255u;
+  };
+  p50 = pct(0.5);
+  p90 = pct(0.9);
+  p99 = pct(0.99);
+}
+
+void WorkCounters::add(const WorkCounters& o) {
+  valid = valid || o.valid;
+  rays += o.rays;
+  work += o.work;
+  hits += o.hits;
+  capped += o.capped;
+  max = std::max(max, o.max);
+  histogram.resize(256, 0);
+  for (size_t k = 0; k < o.histogram.size() && k < 256; ++k) histogram[k] += o.histogram[k];
+  percentiles();
+}
+
+void Renderer::readCounters(WorkCounters& w) {
+  uint32_t c[8 + 256];
+  glGetNamedBufferSubData(gl_->counterBuf, 0, sizeof(c), c);
+  w.valid = true;
+  w.rays = c[0];
+  w.work = c[1];
+  w.max = c[2];
+  w.capped = c[3];
+  w.hits = c[4];
+  w.histogram.assign(c + 8, c + 8 + 256);
+  w.percentiles();
 }
 
 void Renderer::uploadPages(uint64_t budgetBytes) {
@@ -396,6 +486,8 @@ void Renderer::setCommonUniforms(GLuint p, const FrameUniforms& f, const RenderS
   glUniform3fv(glGetUniformLocation(p, "clipBoxMin"), 1, f.clipLo.data());
   glUniform3fv(glGetUniformLocation(p, "clipBoxMax"), 1, f.clipHi.data());
   glUniform4fv(glGetUniformLocation(p, "clipPlane"), 1, f.plane.data());
+  glUniform1i(glGetUniformLocation(p, "countWork"), s.countWork ? 1 : 0);
+  glUniform1ui(glGetUniformLocation(p, "workCap"), 0xfffffffeu);  // a cast that reports more was stopped by its cap
 }
 
 // The frame's camera-relative constants (differences formed in double, then float).
@@ -444,8 +536,9 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     }
     off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
   };
-  drawList(vis.front, g.front, GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
-  drawList(vis.inside, g.inside, GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+  const int m = int(drawnMode(s.mode));
+  drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
+  drawList(vis.inside, g.inside[m], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
   glDisable(GL_CULL_FACE);
   drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
   if (!s.showBoxes) return;
@@ -550,8 +643,16 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   FrameStats& st = out.stats;
   st = FrameStats{};
   st.fragmentsAreInvocations = g.fragTarget == GL_FRAGMENT_SHADER_INVOCATIONS_ARB;
+  st.drawnMode = drawnMode(s.mode);
+  const bool surface = s.mode != RenderMode::kPoints;
   VisibleSet vis;
-  if (s.mode == RenderMode::kParallax) uploadVisibility(cam, camRel, np, s, vis, st);
+  if (surface) uploadVisibility(cam, camRel, np, s, vis, st);
+  if (surface && s.countWork) glClearNamedBufferData(g.counterBuf, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, nullptr);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, g.counterBuf);
+  if (g.mipBuf) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.mipBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, g.mipOffBuf);
+  }
 
   glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
   glViewport(0, 0, cam.width, cam.height);
@@ -576,7 +677,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   const FrameUniforms f = frameUniforms(cam, s, camRel, np);
   glBeginQuery(GL_TIME_ELAPSED, g.timeQuery);
   glBeginQuery(g.fragTarget, g.fragQuery);
-  if (s.mode == RenderMode::kParallax) drawCells(vis, f, s, bufs);
+  if (surface) drawCells(vis, f, s, bufs);
   else drawPoints(cam, f, s, st);
   g.lastWasPost = s.edl;
   if (s.edl) drawEdl(s);
@@ -589,6 +690,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   glGetQueryObjectui64v(g.fragQuery, GL_QUERY_RESULT, &frags);
   st.gpuMs = double(ns) / 1e6;
   st.fragments = frags;
+  if (surface && s.countWork) readCounters(st.work);
   out.milliseconds = st.cpuMs;
   out.cellsDrawn = st.drawn;
   readBack(cam, readBackMask, out);

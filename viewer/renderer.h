@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "atlas/pack_file.h"
+#include "modes/registry.h"
 #include "viewer/camera.h"
 #include "viewer/culling.h"
 #include "viewer/image_io.h"
@@ -17,9 +18,6 @@ namespace sa {
 
 const char* embeddedShader(std::string_view name);  // generated at build time
 
-enum class RenderMode { kParallax, kPoints };
-const char* modeName(RenderMode m);
-Result<RenderMode> parseMode(const std::string& name);
 
 enum class Shading { kLambert = 0, kNormals = 1, kHeight = 2 };
 
@@ -47,6 +45,20 @@ struct RenderSettings {
   float background[3] = {0.1f, 0.1f, 0.12f};
   float baseColor[3] = {0.85f, 0.82f, 0.78f};
   CullOptions cull;      // what a frame may skip (all on by default)
+  bool countWork = false;  // read the work counters back (FrameStats::work); costs atomics per fragment
+};
+
+// Per-frame work of the surface casts (RenderSettings::countWork): a ray is one fragment's cast;
+// work is the mode's unit (parallax: height samples; exact: pyramid nodes visited).
+struct WorkCounters {
+  bool valid = false;
+  uint64_t rays = 0, work = 0, hits = 0, capped = 0;
+  uint32_t max = 0, p50 = 0, p90 = 0, p99 = 0;  // percentiles of work per ray (255 = 255 or more)
+  std::vector<uint64_t> histogram;               // rays per work 0..255 (the last: 255 or more)
+  double mean() const { return rays ? double(work) / double(rays) : 0; }
+  // Adds another frame's counts (percentiles recomputed from the summed histogram).
+  void add(const WorkCounters& o);
+  void percentiles();
 };
 
 struct FrameStats {
@@ -56,6 +68,8 @@ struct FrameStats {
   double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)
   uint64_t fragments = 0;      // fragment shader invocations (or samples passed, see below)
   bool fragmentsAreInvocations = false;
+  RenderMode drawnMode = RenderMode::kParallax;  // a pack without a mode's section draws its fallback
+  WorkCounters work;
 };
 
 enum ReadBack : unsigned { kReadColor = 1, kReadDepth = 2, kReadNormals = 4, kReadCells = 8 };
@@ -82,6 +96,10 @@ class Renderer {
   // The points baseline: positions relative to the pack origin (xyz floats), RGBA8 colours.
   Status setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing);
   bool hasPoints() const { return pointCount_ > 0; }
+  // Whether this pack can draw mode m as itself (its section is present), else what it draws.
+  bool modeReady(RenderMode m) const;
+  RenderMode drawnMode(RenderMode m) const;
+  uint64_t modeGpuBytes(RenderMode m) const;
   Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, unsigned readBackMask);
   Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, bool readDepth) {
     return render(cam, settings, out, kReadColor | (readDepth ? kReadDepth : 0u));
@@ -111,6 +129,8 @@ class Renderer {
   FrameUniforms frameUniforms(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel, double np) const;
   void setCommonUniforms(unsigned program, const FrameUniforms& f, const RenderSettings& s) const;
   void drawCells(const VisibleSet& vis, const FrameUniforms& f, const RenderSettings& s, const unsigned* bufs);
+  Status initModes(const PackReader& pack);
+  void readCounters(WorkCounters& w);
   void drawPoints(const Camera& cam, const FrameUniforms& f, const RenderSettings& s, FrameStats& st);
   void drawEdl(const RenderSettings& s);
   void readBack(const Camera& cam, unsigned what, FrameResult& out);
@@ -121,7 +141,7 @@ class Renderer {
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
   bool hasColor_ = false, hasNormals_ = false;
-  uint64_t gpuBytes_ = 0, pointCount_ = 0;
+  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0;
   double spacing_ = 0;
 };
 

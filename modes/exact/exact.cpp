@@ -1,6 +1,8 @@
 #include "modes/exact/exact.h"
 
 #include <algorithm>
+#include <chrono>
+#include <cstring>
 #include <cmath>
 #include <limits>
 
@@ -206,8 +208,7 @@ bool trace(const PackReader& pack, const CellRecord& c, const uint16_t* codes, c
   double t = t0;
   TraceStats local;
   TraceStats& s = st ? *st : local;
-  // Without the pyramid every patch along the ray is a visit: up to W + H + 2 of them.
-  const uint32_t cap = codes ? uint32_t(kMaxNodeVisits) : uint32_t(2 * (W + H) + 16);
+  const uint32_t cap = maxNodeVisits(W, H);
   for (;;) {
     if (++s.nodeVisits > cap) {
       s.capped = true;
@@ -227,6 +228,18 @@ bool trace(const PackReader& pack, const CellRecord& c, const uint16_t* codes, c
       skip = k == kNodeEmpty || std::min(r.z(t), r.z(tOut)) > decodeNode(k, c.box[4], c.box[5]);
     }
     if (!skip && l > 0) {
+      // A descending ray is above the node's maximum until it reaches that height: no hit
+      // before, so it moves there first (the position is kept inside this node).
+      const double nodeMax = codes ? decodeNode(codes[lv.offset[l] + uint64_t(n[1]) * lv.w[l] + n[0]], c.box[4], c.box[5]) : kInf;
+      if (r.dz < 0 && nodeMax < kInf) {
+        const double tPlane = (nodeMax - r.z0) / r.dz;
+        if (tPlane > t && tPlane < tOut) {
+          t = tPlane;
+          prevAbove = false;
+          for (int a = 0; a < 2; ++a)
+            pos[a] = std::clamp(nodeIndex(r.S(a, t), r.dS[a]), n[a] << l, std::min(((n[a] + 1) << l) - 1, N[a] - 1));
+        }
+      }
       --l;
       continue;
     }
@@ -308,6 +321,54 @@ Pyramids buildPyramids(const PackReader& pack) {
     buildCellPyramid(pack, c, p.codes);
   }
   return p;
+}
+
+ExtraSection bakeSection(const PackReader& pack, double* seconds) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Pyramids p = buildPyramids(pack);
+  SectionHeader h{};
+  h.version = kSectionVersion;
+  h.cellCount = uint32_t(p.offsets.size());
+  h.codeCount = p.codes.size();
+  h.bakeSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (seconds) *seconds = h.bakeSeconds;
+  ExtraSection s;
+  std::memcpy(s.id, kSectionId, 4);
+  s.bytes.resize(sizeof(h) + p.offsets.size() * 8 + p.codes.size() * 2);
+  std::memcpy(s.bytes.data(), &h, sizeof(h));
+  std::memcpy(s.bytes.data() + sizeof(h), p.offsets.data(), p.offsets.size() * 8);
+  std::memcpy(s.bytes.data() + sizeof(h) + p.offsets.size() * 8, p.codes.data(), p.codes.size() * 2);
+  return s;
+}
+
+Result<SectionView> readSection(const PackReader& pack) {
+  const std::span<const uint8_t> b = pack.section(kSectionId);
+  SectionView v;
+  if (b.empty()) return v;
+  const std::string where = pack.path() + ": section XMAX (the exact mode's maxima): ";
+  SectionHeader h;
+  if (b.size() < sizeof(h)) return Status::badInput(where + "too short");
+  std::memcpy(&h, b.data(), sizeof(h));
+  if (h.version != kSectionVersion)
+    return Status::badInput(where + "version " + std::to_string(h.version) + ", this program reads version " +
+                            std::to_string(kSectionVersion) + "; bake it again: scanatlas bake PACK --mode exact");
+  const uint64_t cells = pack.cells().size();
+  if (h.cellCount != cells) return Status::badInput(where + "made for another cell table (bake it again)");
+  if (h.codeCount > b.size() / 2 || sizeof(h) + cells * 8 + h.codeCount * 2 != b.size())
+    return Status::badInput(where + "its size does not match its header");
+  v.present = true;
+  v.bakeSeconds = h.bakeSeconds;
+  v.offsets = reinterpret_cast<const uint64_t*>(b.data() + sizeof(h));
+  v.codes = reinterpret_cast<const uint16_t*>(b.data() + sizeof(h) + cells * 8);
+  v.codeCount = h.codeCount;
+  v.bytes = b.size();
+  for (uint64_t i = 0; i < cells; ++i) {
+    const CellRecord& c = pack.cells()[i];
+    const uint64_t need = levelsOf(c.tileW, c.tileH).total;
+    if (v.offsets[i] > h.codeCount || need > h.codeCount - v.offsets[i])
+      return Status::badInput(where + "cell " + std::to_string(i) + "'s pyramid lies outside the section");
+  }
+  return v;
 }
 
 bool traceCell(const PackReader& pack, const CellRecord& c, const uint16_t* codes, const Eigen::Vector3d& o,

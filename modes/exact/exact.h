@@ -25,7 +25,10 @@ namespace sa::exact {
 
 inline constexpr uint16_t kNodeEmpty = 0;        // nothing covered under the node
 inline constexpr uint16_t kNodeUnbounded = 65535;  // may reach the box top: always descend
-inline constexpr int kMaxNodeVisits = 1024;      // the traversal's cap (a ray that reaches it is counted)
+// The traversal's safety cap for a W x H tile (a ray that reaches it is counted and misses): a
+// ray crossing every patch of the tile at level 0, with an ascent and descent at each, stays
+// below it, so only a traversal that stopped advancing reaches it.
+inline uint32_t maxNodeVisits(int tileW, int tileH) { return 4u * uint32_t(tileW + tileH + 2) + 64u; }
 
 // Node counts of every level of a tile's pyramid (level 0 first).
 struct Levels {
@@ -47,10 +50,37 @@ struct Pyramids {
 };
 Pyramids buildPyramids(const PackReader& pack);
 
+// The pack section that stores them (docs/FORMAT.md, `XMAX`).
+inline constexpr char kSectionId[4] = {'X', 'M', 'A', 'X'};
+inline constexpr uint32_t kSectionVersion = 1;
+struct SectionHeader {
+  uint32_t version;
+  uint32_t cellCount;
+  uint64_t codeCount;
+  double bakeSeconds;
+  uint64_t zero;
+};
+static_assert(sizeof(SectionHeader) == 32);
+
+// Builds every cell's pyramid and lays it out as the XMAX section; seconds: the bake's time.
+ExtraSection bakeSection(const PackReader& pack, double* seconds = nullptr);
+
+// A pack's XMAX section, checked (sizes, offsets inside, one pyramid per cell); present = false
+// when the pack has none.
+struct SectionView {
+  bool present = false;
+  double bakeSeconds = 0;
+  const uint64_t* offsets = nullptr;
+  const uint16_t* codes = nullptr;
+  uint64_t codeCount = 0;
+  uint64_t bytes = 0;
+};
+Result<SectionView> readSection(const PackReader& pack);
+
 struct TraceStats {
   uint32_t nodeVisits = 0;   // pyramid nodes looked at (level-0 patches included)
   uint32_t pieces = 0;       // patch pieces solved exactly
-  bool capped = false;       // stopped at kMaxNodeVisits
+  bool capped = false;       // stopped at maxNodeVisits
 };
 
 // First hit of o + t d (frame coordinates of cell c, d unit or not) over [t0, t1] under the

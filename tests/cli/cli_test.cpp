@@ -17,6 +17,7 @@ namespace {
 struct CmdResult {
   int code;
   std::string out;
+  std::string err;  // only from runErr
 };
 
 CmdResult run(const std::string& args) {
@@ -28,6 +29,20 @@ CmdResult run(const std::string& args) {
   while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
   const int status = pclose(p);
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+// As run, also capturing stderr (into a file beside the binary's temp dir).
+CmdResult runErr(const std::string& args, const std::string& errFile) {
+  const std::string cmd = std::string(SA_BINARY) + " " + args + " 2>" + errFile;
+  std::FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
+  const int status = pclose(p);
+  std::ifstream e(errFile);
+  std::string err((std::istreambuf_iterator<char>(e)), std::istreambuf_iterator<char>());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, err};
 }
 
 // An icosphere mesh PLY (subdivided 4 times): a closed reference surface.
@@ -181,6 +196,57 @@ namespace {
 
 // kill -9 at several moments of a pack: never a file that looks like a pack unless it is a
 // complete one; the next pack removes what the killed one left (chunk files, partial output).
+// The mode framework from the command line: pack --modes bakes the exact mode's section, bake adds
+// it to a pack that lacks it (atomically, to the same or another file), info lists it, bench draws it
+// and reports its bytes, bake time and node counters; a pack without it draws parallax and says so.
+TEST(Cli, ModesBakeInfoBenchAndFallback) {
+  test::TempDir d;
+  writeIcosphere(d.file("ico.ply"));
+  ASSERT_EQ(run("pack " + d.file("ico.ply") + " -o " + d.file("plain.hfa") + " -q").code, 0);
+  CmdResult fb = runErr("bench " + d.file("plain.hfa") + " --orbit 2 --size 64x64 --warmup 0 --frames 2 --mode exact --json",
+                        d.file("err.txt"));
+  ASSERT_EQ(fb.code, 0) << fb.out;
+  EXPECT_NE(fb.err.find("has no XMAX section"), std::string::npos) << fb.err;
+  EXPECT_EQ(nlohmann::json::parse(fb.out)["configs"][0]["drawn_mode"].get<std::string>(), "parallax");
+  auto plain = nlohmann::json::parse(run("info " + d.file("plain.hfa") + " --json").out);
+  bool exactListed = false;
+  for (const auto& m : plain["modes"])
+    if (m["mode"] == "exact") exactListed = !m["present"].get<bool>();
+  EXPECT_TRUE(exactListed);
+
+  EXPECT_EQ(run("bake " + d.file("plain.hfa") + " --mode bogus").code, 2);
+  EXPECT_EQ(run("bake " + d.file("missing.hfa") + " --mode exact").code, 2);
+  EXPECT_EQ(run("bake " + d.file("plain.hfa")).code, 2);  // --mode is required
+  ASSERT_EQ(run("bake " + d.file("plain.hfa") + " --mode exact -o " + d.file("baked.hfa")).code, 0);
+  EXPECT_EQ(run("verify " + d.file("baked.hfa")).code, 0);
+  auto baked = nlohmann::json::parse(run("info " + d.file("baked.hfa") + " --json").out);
+  for (const auto& m : baked["modes"])
+    if (m["mode"] == "exact") {
+      EXPECT_TRUE(m["present"].get<bool>());
+      EXPECT_GT(m["bytes"].get<double>(), 0);
+    }
+  // The input is untouched; baking in place twice is a no-op the second time.
+  EXPECT_EQ(nlohmann::json::parse(run("info " + d.file("plain.hfa") + " --json").out)["bytes"], plain["bytes"]);
+  ASSERT_EQ(run("bake " + d.file("plain.hfa") + " --mode exact").code, 0);
+  CmdResult again = runErr("bake " + d.file("plain.hfa") + " --mode exact", d.file("err.txt"));
+  EXPECT_EQ(again.code, 0);
+  EXPECT_NE(again.err.find("already baked"), std::string::npos) << again.err;
+
+  ASSERT_EQ(run("pack " + d.file("ico.ply") + " -o " + d.file("modes.hfa") + " --modes exact,parallax -q").code, 0);
+  CmdResult b = run("bench " + d.file("modes.hfa") + " --orbit 2 --size 64x64 --warmup 0 --frames 2 --mode parallax,exact --json");
+  ASSERT_EQ(b.code, 0) << b.out;
+  auto bj = nlohmann::json::parse(b.out);
+  ASSERT_EQ(bj["configs"].size(), 2u);
+  const auto& ex = bj["configs"][1];
+  EXPECT_EQ(ex["drawn_mode"].get<std::string>(), "exact");
+  EXPECT_GT(ex["mode_disk_bytes"].get<double>(), 0);
+  EXPECT_GT(ex["mode_gpu_bytes"].get<double>(), 0);
+  EXPECT_GT(ex["work"]["rays"].get<double>(), 0);
+  EXPECT_EQ(ex["work"]["unit"].get<std::string>(), "nodes");
+  EXPECT_EQ(ex["work"]["capped"].get<int>(), 0);
+  EXPECT_EQ(run("pack " + d.file("ico.ply") + " -o " + d.file("x.hfa") + " --modes frobnicate").code, 2);
+}
+
 TEST(Cli, KilledPackLeavesNoHalfWrittenPackAndIsCleanedUpNextTime) {
   test::TempDir d;
   std::vector<Eigen::Vector3d> pts, nrm;

@@ -1,10 +1,11 @@
 #version 450 core
 // Per-pixel ray casting of one cell's height field: Lu, Low & Zheng §3.3. The ray is
 // expressed in the cell's frame (M1, §3.2.2), clipped to the box analytically (so a camera
-// inside the box still sees it when its back faces are rasterized), marched with the box's
-// linear steps, refined by bisection + a final secant step (marchHeightField, heightfield.glsl),
-// and kept only if the hit is on a covered texel inside the box (the boundary test, §3.3.1);
-// otherwise discarded so boxes behind show through. gl_FragDepth comes from the true hit point.
+// inside the box still sees it when its back faces are rasterized), cast by the mode's
+// castCell (the renderer includes the mode's unit where `#include <mode>` stands: the linear
+// search of parallax_cast.glsl, the max-mipmap traversal of modes/exact/exact.glsl), and kept
+// only if the hit is on a covered texel inside the box (the boundary test, §3.3.1); otherwise
+// discarded so boxes behind show through. gl_FragDepth comes from the true hit point.
 //
 // FRONT_FACES (defined by the renderer for boxes the camera is outside of): the fragment is
 // on the box's front face and the hit lies behind it, so with reverse-Z the written depth is
@@ -12,6 +13,7 @@
 #include "heightfield.glsl"
 #include "shading.glsl"
 #include "clip.glsl"
+#include <mode>
 
 #ifdef FRONT_FACES
 layout(depth_less) out float gl_FragDepth;
@@ -22,8 +24,6 @@ flat in int vCell;
 flat in int vSteps;
 flat in vec3 vCamFrame;
 
-uniform int refineSteps;
-uniform int maxSteps;       // the --iterations bound
 uniform float nearPlane;
 uniform vec3 viewForward;   // world forward axis of the camera
 uniform bool useColor;
@@ -33,6 +33,23 @@ layout(location = 0) out vec4 outColor;
 layout(location = 1) out float outDepth;  // linear view depth along the forward axis
 layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
 layout(location = 3) out uint outCell;    // the cell's index + 1 (eval, tests: which cell drew a pixel)
+
+// Work counters, read back when asked (bench --json, eval, the panel, tests): [0] rays cast,
+// [1] work summed (march samples or pyramid nodes), [2] the most one ray took, [3] rays stopped
+// by the mode's cap, [4] hits, [8 + k] rays that took k (k >= 255 in the last).
+layout(std430, binding = 5) buffer Counters { uint counters[]; };
+uniform bool countWork;
+uniform uint workCap;
+
+void count(uint work, bool hit) {
+  if (!countWork) return;
+  atomicAdd(counters[0], 1u);
+  atomicAdd(counters[1], work);
+  atomicMax(counters[2], work);
+  if (work > workCap) atomicAdd(counters[3], 1u);
+  if (hit) atomicAdd(counters[4], 1u);
+  atomicAdd(counters[8u + min(work, 255u)], 1u);
+}
 
 void main() {
   Cell c = cells[vCell];
@@ -48,20 +65,15 @@ void main() {
   float tExit = min(min(tf.x, tf.y), tf.z);
   if (tEnter >= tExit) discard;
 
-  // Steps: about one per 1.5 texels this ray crosses (finer steps than the surface's own
-  // resolution find nothing new, coarser ones step over bumps at grazing angles), at least the
-  // box's estimate from its size on screen, at most the --iterations bound.
-  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
-  float crossed = length(d.xy) * (tExit - tEnter) / min(texel.x, texel.y);
-  int steps = clamp(int(ceil(crossed / 1.5)), max(vSteps, 1), max(maxSteps, 1));
   float tS;
-  if (!marchHeightField(c, o, d, tEnter, tExit, steps, refineSteps, tS)) discard;
+  uint work;
+  bool found = castCell(c, vCell, vSteps, o, d, tEnter, tExit, tS, work);
+  count(work, found);
+  if (!found) discard;
   vec3 hit = o + d * tS;
-  // Boundary test (§3.3.1): inside the box and on a covered texel.
+  // Boundary test (§3.3.1): inside the box (castCell answers only on covered texels).
   if (any(lessThan(hit, bmin - 1e-6 * (bmax - bmin))) || any(greaterThan(hit, bmax + 1e-6 * (bmax - bmin))))
     discard;
-  float hh = sampleHeight(c, hit.xy);
-  if (hh == kUncovered) discard;
 
   vec3 nWorld;
   if (storedNormals) {

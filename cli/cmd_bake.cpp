@@ -1,0 +1,58 @@
+// scanatlas bake: adds what a surface-detail mode needs to an existing pack (modes/registry.h).
+#include <cstdio>
+
+#include "cli/args.h"
+#include "cli/commands.h"
+#include "cli/view_setup.h"
+#include "common/fileio.h"
+#include "modes/registry.h"
+
+namespace sa {
+
+int cmdBake(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv, {"mode", "output"}, {"force", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::printf("usage: scanatlas bake PACK --mode LIST [-o OUT] [--force]\n\n"
+                "Bakes what the listed surface-detail modes need into the pack: their optional sections\n"
+                "(docs/FORMAT.md), checksummed like the rest. The pack is rewritten atomically (a complete\n"
+                "new file replaces it, or goes to OUT); its cells, pages and hash are unchanged. A mode whose\n"
+                "section is already there is skipped unless --force. Modes:\n");
+    for (const ModeInfo& m : allModes()) std::printf("  %-9s %s\n", m.name, m.summary);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().size() != 1) return reportError(Status::badInput("bake: give exactly one pack (see --help)"));
+  if (!a.has("mode")) return reportError(Status::badInput("bake: --mode LIST is required (modes: " + modeList() + ")"));
+  const std::string in = a.positionals()[0];
+  const std::string out = a.has("output") ? a.get("output") : in;
+  PackReader pack;
+  s = pack.open(in);
+  if (!s) return reportError(s);
+  std::vector<RenderMode> todo;
+  const bool quiet = a.flag("quiet");
+  for (const std::string& name : splitList(a.get("mode"))) {
+    auto m = parseMode(name);
+    if (!m) return reportError(Status::badInput("--mode: " + m.status().message()));
+    const ModeSection ms = modeSection(pack, *m);
+    if (!ms.needed) {
+      if (!quiet) std::fprintf(stderr, "%s: needs nothing baked\n", name.c_str());
+      continue;
+    }
+    if (ms.present && !a.flag("force") && out == in) {
+      if (!quiet) std::fprintf(stderr, "%s: already baked (%.1f MiB, %.2f s); --force bakes it again\n", name.c_str(),
+                               double(ms.bytes) / (1 << 20), ms.bakeSeconds);
+      continue;
+    }
+    todo.push_back(*m);
+  }
+  if (todo.empty() && out == in) return 0;
+  std::vector<std::string> report;
+  s = bakeModes(in, out, todo, report);
+  if (!s) return reportError(s);
+  if (!quiet)
+    for (const std::string& r : report) std::fprintf(stderr, "baked %s -> %s\n", r.c_str(), out.c_str());
+  return 0;
+}
+
+}  // namespace sa

@@ -1,0 +1,50 @@
+// The surface-detail modes: one table. A mode is a bake (optional, versioned, checksummed pack
+// sections, written only when asked: `pack --modes`, `scanatlas bake`), a shader unit (the
+// renderer's per-mode cast function, viewer/shaders or modes/<name>/) and a CPU reference.
+// Adding a mode: a folder under modes/ and one line in kModes (modes/registry.cpp).
+#pragma once
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "atlas/pack_file.h"
+#include "common/error.h"
+
+namespace sa {
+
+enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2 };
+
+struct ModeInfo {
+  RenderMode mode;
+  const char* name;
+  const char* summary;      // one line for --help and info
+  const char* sectionId;    // the section its bake writes, null when it needs none
+  // Builds the section from a pack (null when nothing is baked); seconds: the bake's time.
+  ExtraSection (*bake)(const PackReader& pack, double* seconds);
+  const char* fallback;     // what a pack without the section draws instead
+  const char* castUnit;     // the shader unit defining castCell (embedded by name), null for points
+};
+
+std::span<const ModeInfo> allModes();
+const ModeInfo& modeInfo(RenderMode m);
+const char* modeName(RenderMode m);
+Result<RenderMode> parseMode(const std::string& name);
+// "parallax, exact, points": for messages and --help.
+std::string modeList();
+
+// What a pack holds for a mode: whether its section is there, its bytes and bake seconds.
+struct ModeSection {
+  bool needed = false;   // the mode has a bake
+  bool present = false;
+  uint64_t bytes = 0;
+  double bakeSeconds = 0;
+};
+ModeSection modeSection(const PackReader& pack, RenderMode m);
+
+// Bakes `modes` for the pack at `in` and writes the pack with their sections to `out`
+// (atomically; may equal `in`). Modes without a bake are skipped; report gets a line per mode.
+Status bakeModes(const std::string& in, const std::string& out, const std::vector<RenderMode>& modes,
+                 std::vector<std::string>& report);
+
+}  // namespace sa
