@@ -3,6 +3,7 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/progress.h"
 #include "cli/view_setup.h"
 #include "common/fileio.h"
 #include "modes/registry.h"
@@ -11,13 +12,18 @@ namespace sa {
 
 int cmdBake(int argc, char** argv) {
   Args a;
-  Status s = a.parse(argc, argv, {"mode", "output"}, {"force", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+  Status s = a.parse(argc, argv, {"mode", "output", "clip-box", "budget"}, {"force", "quiet", "help"},
+                     {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
-    std::printf("usage: scanatlas bake PACK --mode LIST [-o OUT] [--force]\n\n"
+    std::printf("usage: scanatlas bake PACK --mode LIST [-o OUT] [--clip-box X0,Y0,Z0,X1,Y1,Z1] [--budget SIZE] [--force]\n\n"
                 "Bakes what the listed surface-detail modes need into the pack: their optional sections\n"
                 "(docs/FORMAT.md), checksummed like the rest. The pack is rewritten atomically (a complete\n"
                 "new file replaces it, or goes to OUT); its cells, pages and hash are unchanged. A mode whose\n"
-                "section is already there is skipped unless --force. Modes:\n");
+                "section is already there is skipped unless --force. Baking runs on every core.\n"
+                "  --clip-box ...   vdm: only the cells whose box meets this box (world coordinates)\n"
+                "  --budget SIZE    vdm: the section's bytes never exceed SIZE (default 256M; suffixes K, M, G);\n"
+                "                   cells are taken in pack order while their worst case still fits\n"
+                "Modes:\n");
     for (const ModeInfo& m : allModes()) std::printf("  %-9s %s\n", m.name, m.summary);
     return 0;
   }
@@ -47,8 +53,26 @@ int cmdBake(int argc, char** argv) {
     todo.push_back(*m);
   }
   if (todo.empty() && out == in) return 0;
+  BakeRequest req;
+  if (a.has("clip-box")) {
+    std::vector<double> n;
+    s = numberList(a, "clip-box", 6, n);
+    if (!s) return reportError(s);
+    req.clip = true;
+    req.lo = Eigen::Vector3d(std::min(n[0], n[3]), std::min(n[1], n[4]), std::min(n[2], n[5]));
+    req.hi = Eigen::Vector3d(std::max(n[0], n[3]), std::max(n[1], n[4]), std::max(n[2], n[5]));
+  }
+  if (a.has("budget")) {
+    auto v = parseSize("budget", a.get("budget"));
+    if (!v) return reportError(v.status());
+    if (*v < (1u << 16)) return reportError(Status::badInput("--budget: at least 64K"));
+    req.budget = *v;
+  }
+  Progress progress(!quiet, "bake", "cells");
+  req.progress = [&](uint64_t done, uint64_t total) { progress("vdm cells", done, total); };
   std::vector<std::string> report;
-  s = bakeModes(in, out, todo, report);
+  s = bakeModes(in, out, todo, report, req);
+  progress.finish();
   if (!s) return reportError(s);
   if (!quiet)
     for (const std::string& r : report) std::fprintf(stderr, "baked %s -> %s\n", r.c_str(), out.c_str());

@@ -151,7 +151,9 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
        << ", \"mode_gpu_bytes\": " << renderer.modeGpuBytes(c.settings.mode) << ", \"mode_disk_bytes\": " << ms.bytes
        << ", \"bake_s\": " << ms.bakeSeconds;
   if (r.work.valid)
-    json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kExact ? "nodes" : "samples") << "\", \"rays\": " << r.work.rays
+    json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kParallax ? "samples" : "nodes") << "\", \"rays\": " << r.work.rays
+         << ", \"vdm_top_lookups\": " << r.work.topLookups << ", \"vdm_fallbacks\": " << r.work.fallbacks
+         << ", \"vdm_fast_misses\": " << r.work.fastMisses
          << ", \"hits\": " << r.work.hits << ", \"mean\": " << r.work.mean() << ", \"p50\": " << r.work.p50 << ", \"p90\": "
          << r.work.p90 << ", \"p99\": " << r.work.p99 << ", \"max\": " << r.work.max << ", \"capped\": " << r.work.capped << "}";
   json << "}";
@@ -165,7 +167,7 @@ void printTable(const std::vector<Row>& rows, const std::string& renderer) {
                "frame p95", "frame p99", "frame min", "fps", "gpu med", "drawn", "culled", "splats", "fragments", "work/ray", "work p99");
   for (const Row& r : rows) {
     const bool points = r.config.settings.mode == RenderMode::kPoints;
-    const bool exactMode = r.drawn_mode == RenderMode::kExact && !points;
+    const bool exactMode = r.drawn_mode != RenderMode::kParallax && !points;
     std::fprintf(stderr, "%-9s %5s %-18s %9.2f %9.2f %9.2f %9.2f %8.1f %9.2f %8.0f %8.0f %8.0f %12.0f %10.1f %8u\n",
                  modeName(points ? RenderMode::kPoints : r.drawn_mode),
                  points || exactMode ? "-" : std::to_string(r.config.settings.iterations).c_str(),

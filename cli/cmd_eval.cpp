@@ -55,7 +55,8 @@ const char* kHelp =
     "  --path FILE | --orbit N   cameras (default --orbit 8); --zoom F as for bench\n"
     "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render (up\n"
     "                         defaults to the pack's up axis)\n"
-    "  --mode LIST            parallax, points (default parallax)\n"
+    "  --mode LIST            parallax, exact (needs 'scanatlas bake PACK --mode exact'), points\n"
+    "                         (default parallax); one row per mode (per --iterations for parallax)\n"
     "  --iterations LIST      parallax step bounds (default 64)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
     "                         view; default 3)\n"
@@ -98,6 +99,7 @@ struct Row {
   std::optional<FarStats> far;
   std::optional<SeamStats> seam;
   std::vector<ViewResult> views;
+  WorkCounters work;  // from the (untimed) error renders
 };
 
 Status parseOptions(const Args& a, const PackReader& pack, Options& o) {
@@ -171,9 +173,12 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
   std::optional<SeamStats> seamAll;
   for (size_t v = 0; v < o.cams.size(); ++v) {
     FrameResult fr;
-    const bool parallax = rs.mode == RenderMode::kParallax;
+    const bool parallax = rs.mode != RenderMode::kPoints;  // a height-field mode: per-cell seams too
     const unsigned want = kReadColor | kReadDepth | (parallax ? kReadNormals | kReadCells : 0u);
-    SA_RETURN_IF_ERROR(renderer.render(o.cams[v], rs, fr, want));
+    RenderSettings counted = rs;
+    counted.countWork = parallax;
+    SA_RETURN_IF_ERROR(renderer.render(o.cams[v], counted, fr, want));
+    if (parallax) row.work.add(fr.stats.work);
     ViewResult vr;
     vr.ms = ms[v];
     if (parallax) {
@@ -309,6 +314,10 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
                   "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f, \"interior_holes\": %zu",
                   r.iou, r.iouMin, r.sil, r.depthMed, r.depthP95,
                   r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr, r.holes);
+    if (r.work.valid)
+      std::printf(", \"work\": {\"unit\": \"%s\", \"rays\": %llu, \"mean\": %.3f, \"p50\": %u, \"p90\": %u, \"p99\": %u, "
+                  "\"max\": %u, \"capped\": %llu}", r.mode == "parallax" ? "samples" : "nodes", (unsigned long long)r.work.rays,
+                  r.work.mean(), r.work.p50, r.work.p90, r.work.p99, r.work.max, (unsigned long long)r.work.capped);
     std::printf(", \"far\": %s, \"seam\": %s, \"per_view\": [", farJson(r.far).c_str(), seamJson(r.seam).c_str());
     for (size_t v = 0; v < r.views.size(); ++v) {
       const ViewResult& vr = r.views[v];
@@ -406,14 +415,18 @@ int runEval(const Args& a) {
   }
   if (o.far) samples = std::make_unique<NearestSamples>(std::move(src.xyz));
   std::vector<Row> rows;
+  if (!o.quiet)
+    for (RenderMode mode : o.modes) warnIfModeFallsBack(renderer, pack, mode);
   for (RenderMode mode : o.modes) {
-    const std::vector<int> its = mode == RenderMode::kPoints ? std::vector<int>{0} : o.iterations;
+    // Only parallax has linear steps; the others are one configuration each.
+    const bool stepped = renderer.drawnMode(mode) == RenderMode::kParallax && mode != RenderMode::kPoints;
+    const std::vector<int> its = stepped ? o.iterations : std::vector<int>{0};
     for (int it : its) {
       RenderSettings rs = base;
       rs.mode = mode;
       if (it > 0) rs.iterations = it;
       Row row;
-      row.mode = modeName(mode);
+      row.mode = modeName(mode == RenderMode::kPoints ? mode : renderer.drawnMode(mode));
       row.iterations = it;
       row.skips = mode == RenderMode::kPoints ? "-" : "all";
       s = evaluateConfig(renderer, pack, o, ref.get(), samples.get(), rs, row);

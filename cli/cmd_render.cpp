@@ -36,13 +36,19 @@ const char* kHelp =
     "  --depth-out FILE.pfm   also write float32 linear view depth (distance along the camera's\n"
     "                         forward axis, world units; inf where nothing was hit)\n"
     "  --mode MODE            parallax (default: linear search + bisection), exact (max-mipmap\n"
-    "                         traversal with the exact root; needs 'scanatlas bake PACK --mode exact',\n"
-    "                         else parallax is drawn and a warning says so)\n"
+    "                         traversal with the exact root; needs 'scanatlas bake PACK --mode exact'),\n"
+    "                         vdm (view-dependent displacement lookups; needs 'scanatlas bake PACK\n"
+    "                         --mode vdm'); a mode the pack lacks draws its fallback and says so\n"
     "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
     "  --shading MODE         lambert (head light, default), normals, height (colour ramp along --up),\n"
     "                         color (scan colour, the default when the pack has colour)\n"
+    "  --light X,Y,Z          a fixed light from this direction (world, toward the light) instead of\n"
+    "                         the head light\n"
+    "  --shadows              self-shadowing: each hit casts a second ray toward the light within its\n"
+    "                         cell, by the mode's own cast (vdm: a lookup; 001 §3.2); default light\n"
+    "                         45 degrees up from the first view's right\n"
     "  --edl                  eye-dome lighting (depth-based relief and outlines)\n"
     "  --boxes                draw the cells' boxes, coloured by their height axis (decomposition view)\n"
     "  --clip-box X0,Y0,Z0,X1,Y1,Z1   show only what lies inside this box (world coordinates)\n"
@@ -91,6 +97,14 @@ Status settingsFromArgs(const Args& a, RenderSettings& rs) {
     else return Status::badInput("--shading: expected lambert, normals, height or color, got '" + sh + "'");
   }
   rs.edl = a.flag("edl");
+  if (a.has("light")) {
+    auto v = parseVec3("light", a.get("light"));
+    if (!v) return v.status();
+    if (!(v->norm() > 0)) return Status::badInput("--light must not be zero");
+    rs.headLight = false;
+    rs.lightDir = v->normalized();
+  }
+  rs.shadows = a.flag("shadows");
   rs.showBoxes = a.flag("boxes");
   std::vector<double> n;
   if (a.has("clip-box")) {
@@ -150,8 +164,8 @@ int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
-                      "background", "shading", "clip-box", "section", "mode"},
-                     {"edl", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
+                      "background", "shading", "clip-box", "section", "mode", "light"},
+                     {"edl", "shadows", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
@@ -170,6 +184,10 @@ int cmdRender(int argc, char** argv) {
   s = settingsFromArgs(a, rs);
   if (!s) return reportError(s);
   rs.up = cams[0].up;
+  if (rs.shadows && rs.headLight) {  // a head light casts no visible shadow: light from up and to the right
+    rs.headLight = false;
+    rs.lightDir = (cams[0].up.normalized() + cams[0].forward().cross(cams[0].up).normalized()).normalized();
+  }
   Outputs outputs;
   s = outputsFromArgs(a, cams.size(), outputs);
   if (!s) return reportError(s);

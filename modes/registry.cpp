@@ -1,25 +1,60 @@
 #include "modes/registry.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 
 #include "modes/exact/exact.h"
+#include "modes/vdm/vdm.h"
 
 namespace sa {
 namespace {
 
-ExtraSection bakeExact(const PackReader& pack, double* seconds) { return exact::bakeSection(pack, seconds); }
+ExtraSection bakeExact(const PackReader& pack, const BakeRequest&, std::string& summary) {
+  double seconds = 0;
+  ExtraSection s = exact::bakeSection(pack, &seconds);
+  char line[160];
+  std::snprintf(line, sizeof(line), "exact: section XMAX, %.1f MiB, baked in %.2f s", double(s.bytes.size()) / (1 << 20), seconds);
+  summary = line;
+  return s;
+}
+
+inline constexpr uint64_t kVdmDefaultBudget = uint64_t(256) << 20;
+
+ExtraSection bakeVdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
+  vdm::Selection sel;
+  sel.clip = req.clip;
+  sel.lo = req.lo;
+  sel.hi = req.hi;
+  sel.budget = req.budget ? req.budget : kVdmDefaultBudget;
+  vdm::BakeReport rep;
+  ExtraSection s = vdm::bakeSection(pack, sel, vdm::BakeOptions{}, rep, req.progress);
+  char line[400];
+  std::snprintf(line, sizeof(line),
+                "vdm: section VDMF, %.1f MiB (budget %.0f MiB%s), %u of %u cells%s baked (%llu texels, %.1f B/texel, mean rank "
+                "%.1f) in %.1f s%s",
+                double(rep.bytes) / (1 << 20), double(sel.budget) / (1 << 20), req.budget ? "" : ", the default", rep.baked,
+                rep.candidates, req.clip ? " in the clip box" : "", (unsigned long long)rep.texels,
+                rep.texels ? double(rep.bytes) / double(rep.texels) : 0.0, rep.meanRank, rep.seconds,
+                rep.overBudget ? (" - " + std::to_string(rep.overBudget) + " cells left out by the budget (they draw exact)").c_str()
+                               : "");
+  summary = line;
+  return s;
+}
 
 const ModeInfo kModes[] = {
     {RenderMode::kParallax, "parallax", "linear search + bisection per height field (Lu, Low & Zheng); needs nothing baked",
-     nullptr, nullptr, nullptr, "parallax_cast.glsl"},
+     nullptr, nullptr, RenderMode::kParallax, nullptr, "parallax_cast.glsl"},
     {RenderMode::kExact, "exact",
      "maximum-mipmap traversal with the exact ray-patch root (Tevs et al. 2008); bakes XMAX (about 2/3 of the heights' bytes)",
-     exact::kSectionId, bakeExact, "parallax", "exact.glsl"},
+     exact::kSectionId, bakeExact, RenderMode::kExact, "parallax", "exact.glsl"},
+    {RenderMode::kVdm, "vdm",
+     "view-dependent displacement (Wang et al. 2003): a per-texel distance per view direction, PCA-compressed, predict -> "
+     "verify -> exact traversal; bakes VDMF for the cells in --clip-box or up to --budget (default 256M), and XMAX",
+     vdm::kSectionId, bakeVdm, RenderMode::kExact, "exact", "vdm.glsl"},
     {RenderMode::kPoints, "points", "the source points as splats (the baseline; reads the pack's sources)", nullptr, nullptr,
-     nullptr, nullptr},
+     RenderMode::kPoints, nullptr, nullptr},
 };
-
 }  // namespace
 
 std::span<const ModeInfo> allModes() { return kModes; }
@@ -56,26 +91,39 @@ ModeSection modeSection(const PackReader& pack, RenderMode m) {
       s.bytes = v->bytes;
       s.bakeSeconds = v->bakeSeconds;
     }
+  } else if (m == RenderMode::kVdm) {
+    auto v = vdm::readSection(pack);
+    if (v.isOk() && v->present) {
+      s.present = true;
+      s.bytes = v->bytes;
+      s.bakeSeconds = v->header.bakeSeconds;
+    }
   }
   return s;
 }
 
 Status bakeModes(const std::string& in, const std::string& out, const std::vector<RenderMode>& modes,
-                 std::vector<std::string>& report) {
+                 std::vector<std::string>& report, const BakeRequest& req) {
   PackReader pack;
   SA_RETURN_IF_ERROR(pack.open(in));
-  std::vector<ExtraSection> add;
+  std::vector<RenderMode> todo;
   for (RenderMode m : modes) {
     const ModeInfo& i = modeInfo(m);
     if (!i.bake) {
       report.push_back(std::string(i.name) + ": nothing to bake");
       continue;
     }
-    double seconds = 0;
-    add.push_back(i.bake(pack, &seconds));
-    char line[160];
-    std::snprintf(line, sizeof(line), "%s: section %.4s, %.1f MiB, baked in %.2f s", i.name, i.sectionId,
-                  double(add.back().bytes.size()) / (1 << 20), seconds);
+    // A mode's fallback section first, when the pack lacks it (vdm falls back to exact).
+    if (i.needsMode != m && !modeSection(pack, i.needsMode).present &&
+        std::find(todo.begin(), todo.end(), i.needsMode) == todo.end() &&
+        std::find(modes.begin(), modes.end(), i.needsMode) == modes.end())
+      todo.push_back(i.needsMode);
+    if (std::find(todo.begin(), todo.end(), m) == todo.end()) todo.push_back(m);
+  }
+  std::vector<ExtraSection> add;
+  for (RenderMode m : todo) {
+    std::string line;
+    add.push_back(modeInfo(m).bake(pack, req, line));
     report.push_back(line);
   }
   if (add.empty() && in == out) return Status::ok();

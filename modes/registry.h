@@ -3,6 +3,7 @@
 // renderer's per-mode cast function, viewer/shaders or modes/<name>/) and a CPU reference.
 // Adding a mode: a folder under modes/ and one line in kModes (modes/registry.cpp).
 #pragma once
+#include <functional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -13,15 +14,25 @@
 
 namespace sa {
 
-enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2 };
+enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3 };
+inline constexpr int kRenderModes = 4;
+
+// What a bake may be limited to (modes that bake per cell: vdm).
+struct BakeRequest {
+  bool clip = false;  // only cells whose box meets [lo, hi] (world coordinates)
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  uint64_t budget = 0;  // bytes the section may take (0: the mode's default)
+  std::function<void(uint64_t done, uint64_t total)> progress;
+};
 
 struct ModeInfo {
   RenderMode mode;
   const char* name;
   const char* summary;      // one line for --help and info
   const char* sectionId;    // the section its bake writes, null when it needs none
-  // Builds the section from a pack (null when nothing is baked); seconds: the bake's time.
-  ExtraSection (*bake)(const PackReader& pack, double* seconds);
+  // Builds the section from a pack (null when nothing is baked); summary: one line for the user.
+  ExtraSection (*bake)(const PackReader& pack, const BakeRequest& req, std::string& summary);
+  RenderMode needsMode;      // a mode whose section this one also needs (its own mode when none)
   const char* fallback;     // what a pack without the section draws instead
   const char* castUnit;     // the shader unit defining castCell (embedded by name), null for points
 };
@@ -45,6 +56,6 @@ ModeSection modeSection(const PackReader& pack, RenderMode m);
 // Bakes `modes` for the pack at `in` and writes the pack with their sections to `out`
 // (atomically; may equal `in`). Modes without a bake are skipped; report gets a line per mode.
 Status bakeModes(const std::string& in, const std::string& out, const std::vector<RenderMode>& modes,
-                 std::vector<std::string>& report);
+                 std::vector<std::string>& report, const BakeRequest& req = {});
 
 }  // namespace sa

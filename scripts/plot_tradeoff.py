@@ -29,7 +29,7 @@ def main():
             xs, ys = [p[0] for p in pts], [p[1] for p in pts]
             ax.plot(xs, ys, marker="o", label=mode)
             for x, y, it, sk in pts:
-                tag = ("" if mode == "points" else it + " it") + ("" if sk in ("all", "-") else " " + sk)
+                tag = ("" if it in ("", "0") else it + " it") + ("" if sk in ("all", "-") else " " + sk)
                 if tag:
                     ax.annotate(tag, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
         ax.set_xlabel("median frame time (ms)")

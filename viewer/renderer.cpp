@@ -1,6 +1,7 @@
 #include "viewer/renderer.h"
 
 #include "modes/exact/exact.h"
+#include "modes/vdm/vdm.h"
 
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
@@ -20,29 +21,32 @@ namespace {
 
 // Expands `#include "name"` lines with the embedded files (`#include <mode>` with the mode's cast
 // unit, modeUnit) and inserts `defines` after the #version line.
+// Expands `#include "name"` lines (recursively) with the embedded text.
+std::string expandIncludes(const std::string& text, const std::string& modeUnit, int depth) {
+  std::istringstream in(text);
+  std::string line, out;
+  while (std::getline(in, line)) {
+    std::string inc;
+    if (line.rfind("#include <mode>", 0) == 0) inc = modeUnit;
+    else if (line.rfind("#include \"", 0) == 0) inc = line.substr(10, line.find('"', 10) - 10);
+    if (inc.empty()) {
+      out += line + "\n";
+      continue;
+    }
+    const char* body = embeddedShader(inc);
+    out += body && depth < 8 ? expandIncludes(body, modeUnit, depth + 1) : "#error missing include " + inc + "\n";
+  }
+  return out;
+}
+
+// The shader `name` with its includes expanded (`#include <mode>`: the mode's cast unit,
+// modeUnit) and `defines` inserted after the #version line.
 std::string shaderSource(const std::string& name, const std::string& defines, const std::string& modeUnit) {
   const char* text = embeddedShader(name);
   if (!text) return {};
-  std::istringstream in(text);
-  std::string line, out;
-  bool first = true;
-  while (std::getline(in, line)) {
-    if (line.rfind("#include <mode>", 0) == 0) {
-      const char* body = embeddedShader(modeUnit);
-      out += body ? body : "#error missing mode unit " + modeUnit;
-      out += "\n";
-    } else if (line.rfind("#include \"", 0) == 0) {
-      const std::string inc = line.substr(10, line.find('"', 10) - 10);
-      const char* body = embeddedShader(inc);
-      out += body ? body : "#error missing include " + inc;
-      out += "\n";
-    } else {
-      out += line + "\n";
-    }
-    if (first) out += defines;
-    first = false;
-  }
-  return out;
+  const std::string all = expandIncludes(text, modeUnit, 0);
+  const size_t eol = all.find('\n');
+  return eol == std::string::npos ? all : all.substr(0, eol + 1) + defines + all.substr(eol + 1);
 }
 
 Status compile(GLenum type, const std::string& name, const std::string& defines, const std::string& modeUnit,
@@ -111,10 +115,11 @@ bool hasExtension(const char* name) {
 struct Renderer::Gl {
   // Per surface mode (indexed by RenderMode): programs for boxes the camera is outside of
   // (front faces) and inside of (back faces); 0 where the mode cannot draw this pack.
-  GLuint front[3] = {}, inside[3] = {};
+  GLuint front[kRenderModes] = {}, inside[kRenderModes] = {};
   GLuint splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
+  GLuint vdmEntryBuf = 0, vdmWordBuf = 0;            // vdm: per-cell block offsets, the blocks
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
   const PackReader* pack = nullptr;   // for streamed pages
@@ -139,11 +144,11 @@ struct Renderer::Gl {
   ~Gl() {
     for (GLuint p : {splat, points, edl, boxes})
       if (p) glDeleteProgram(p);
-    for (int m = 0; m < 3; ++m)
+    for (int m = 0; m < kRenderModes; ++m)
       for (GLuint p : {front[m], inside[m]})
         if (p) glDeleteProgram(p);
-    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf};
-    glDeleteBuffers(3, modeBufs);
+    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf, vdmEntryBuf, vdmWordBuf};
+    glDeleteBuffers(5, modeBufs);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -278,6 +283,19 @@ Status Renderer::initModes(const PackReader& pack) {
       exactBytes_ = words * 4 + offsets.size() * 4;
       gpuBytes_ += exactBytes_;
     }
+    if (mi.mode == RenderMode::kVdm) {
+      auto v = vdm::readSection(pack);
+      if (!v.isOk()) return v.status();
+      if (!v->present || !g.mipBuf) continue;  // vdm needs exact's maxima for its fallback
+      glCreateBuffers(1, &g.vdmEntryBuf);
+      glNamedBufferStorage(g.vdmEntryBuf, GLsizeiptr(std::max<size_t>(v->header.cellCount, 1) * 4), v->entries, 0);
+      glCreateBuffers(1, &g.vdmWordBuf);
+      const uint32_t zero = 0;
+      glNamedBufferStorage(g.vdmWordBuf, GLsizeiptr(std::max<uint64_t>(v->header.wordCount, 1) * 4),
+                           v->header.wordCount ? static_cast<const void*>(v->words) : &zero, 0);
+      vdmBytes_ = (uint64_t(v->header.cellCount) + v->header.wordCount) * 4;
+      gpuBytes_ += vdmBytes_;
+    }
     const int k = int(mi.mode);
     SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n", g.front[k], mi.castUnit));
     SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "", g.inside[k], mi.castUnit));
@@ -293,11 +311,18 @@ bool Renderer::modeReady(RenderMode m) const {
 }
 
 RenderMode Renderer::drawnMode(RenderMode m) const {
-  if (m == RenderMode::kPoints || modeReady(m)) return m;
-  return RenderMode::kParallax;
+  // Down the fallback chain (vdm -> exact -> parallax) to the first mode this pack can draw.
+  while (m != RenderMode::kPoints && !modeReady(m) && m != RenderMode::kParallax) {
+    const char* fb = modeInfo(m).fallback;
+    auto next = parseMode(fb ? fb : "parallax");
+    m = next.isOk() ? *next : RenderMode::kParallax;
+  }
+  return m;
 }
 
-uint64_t Renderer::modeGpuBytes(RenderMode m) const { return m == RenderMode::kExact ? exactBytes_ : 0; }
+uint64_t Renderer::modeGpuBytes(RenderMode m) const {
+  return m == RenderMode::kExact ? exactBytes_ : m == RenderMode::kVdm ? vdmBytes_ + exactBytes_ : 0;
+}
 
 void WorkCounters::percentiles() {
   auto pct = [&](double q) {
@@ -318,6 +343,9 @@ void WorkCounters::add(const WorkCounters& o) {
   work += o.work;
   hits += o.hits;
   capped += o.capped;
+  fallbacks += o.fallbacks;
+  fastMisses += o.fastMisses;
+  topLookups += o.topLookups;
   max = std::max(max, o.max);
   histogram.resize(256, 0);
   for (size_t k = 0; k < o.histogram.size() && k < 256; ++k) histogram[k] += o.histogram[k];
@@ -333,6 +361,9 @@ void Renderer::readCounters(WorkCounters& w) {
   w.max = c[2];
   w.capped = c[3];
   w.hits = c[4];
+  w.fallbacks = c[5];
+  w.fastMisses = c[6];
+  w.topLookups = c[7];
   w.histogram.assign(c + 8, c + 8 + 256);
   w.percentiles();
 }
@@ -487,6 +518,7 @@ void Renderer::setCommonUniforms(GLuint p, const FrameUniforms& f, const RenderS
   glUniform3fv(glGetUniformLocation(p, "clipBoxMax"), 1, f.clipHi.data());
   glUniform4fv(glGetUniformLocation(p, "clipPlane"), 1, f.plane.data());
   glUniform1i(glGetUniformLocation(p, "countWork"), s.countWork ? 1 : 0);
+  glUniform1i(glGetUniformLocation(p, "shadows"), s.shadows && !s.headLight ? 1 : 0);
   glUniform1ui(glGetUniformLocation(p, "workCap"), 0xfffffffeu);  // a cast that reports more was stopped by its cap
 }
 
@@ -617,6 +649,12 @@ void Renderer::readBack(const Camera& cam, unsigned what, FrameResult& out) {
     out.normals.resize(n * 3);
     readFlipped(GL_COLOR_ATTACHMENT2, GL_RGB, GL_FLOAT, 12, out.normals.data());
   }
+  if (what & kReadShadow) {
+    std::vector<float> rgba(n * 4);
+    readFlipped(GL_COLOR_ATTACHMENT2, GL_RGBA, GL_FLOAT, 16, rgba.data());
+    out.shadowed.resize(n);
+    for (size_t i = 0; i < n; ++i) out.shadowed[i] = rgba[4 * i + 3] > 0.5f ? 1 : 0;
+  }
   if (what & kReadCells) {
     out.cells.resize(n);
     readFlipped(GL_COLOR_ATTACHMENT3, GL_RED_INTEGER, GL_UNSIGNED_INT, 4, out.cells.data());
@@ -632,7 +670,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   // The normal and cell attachments are written only when asked for (eval, tests), so bench
   // frames do not pay.
   const GLenum bufs[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1,
-                         (readBackMask & kReadNormals) ? GLenum(GL_COLOR_ATTACHMENT2) : GLenum(GL_NONE),
+                         (readBackMask & (kReadNormals | kReadShadow)) ? GLenum(GL_COLOR_ATTACHMENT2) : GLenum(GL_NONE),
                          (readBackMask & kReadCells) ? GLenum(GL_COLOR_ATTACHMENT3) : GLenum(GL_NONE)};
   glNamedFramebufferDrawBuffers(g.fbo, 4, bufs);
 
@@ -653,6 +691,10 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.mipBuf);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, g.mipOffBuf);
   }
+  if (g.vdmWordBuf) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.vdmEntryBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.vdmWordBuf);
+  }
 
   glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
   glViewport(0, 0, cam.width, cam.height);
@@ -666,7 +708,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   const GLuint noCell[4] = {0, 0, 0, 0};
   glClearNamedFramebufferfv(g.fbo, GL_COLOR, 0, bg);
   glClearNamedFramebufferfv(g.fbo, GL_COLOR, 1, depthInit);
-  if (readBackMask & kReadNormals) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
+  if (readBackMask & (kReadNormals | kReadShadow)) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
   if (readBackMask & kReadCells) glClearNamedFramebufferuiv(g.fbo, GL_COLOR, 3, noCell);
   const float zero = 0.f;
   glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);

@@ -46,6 +46,9 @@ struct RenderSettings {
   float baseColor[3] = {0.85f, 0.82f, 0.78f};
   CullOptions cull;      // what a frame may skip (all on by default)
   bool countWork = false;  // read the work counters back (FrameStats::work); costs atomics per fragment
+  // Self-shadowing (001 §3.2): a second cast from each hit toward the light (lightDir; needs
+  // headLight off), within the hit's cell, by the mode's own cast (vdm: a lookup).
+  bool shadows = false;
 };
 
 // Per-frame work of the surface casts (RenderSettings::countWork): a ray is one fragment's cast;
@@ -53,6 +56,7 @@ struct RenderSettings {
 struct WorkCounters {
   bool valid = false;
   uint64_t rays = 0, work = 0, hits = 0, capped = 0;
+  uint64_t topLookups = 0, fallbacks = 0, fastMisses = 0;  // vdm: top-face lookups, those that fell back, fast misses
   uint32_t max = 0, p50 = 0, p90 = 0, p99 = 0;  // percentiles of work per ray (255 = 255 or more)
   std::vector<uint64_t> histogram;               // rays per work 0..255 (the last: 255 or more)
   double mean() const { return rays ? double(work) / double(rays) : 0; }
@@ -72,13 +76,14 @@ struct FrameStats {
   WorkCounters work;
 };
 
-enum ReadBack : unsigned { kReadColor = 1, kReadDepth = 2, kReadNormals = 4, kReadCells = 8 };
+enum ReadBack : unsigned { kReadColor = 1, kReadDepth = 2, kReadNormals = 4, kReadCells = 8, kReadShadow = 16 };
 
 struct FrameResult {
   Image color;                // RGBA8, row 0 at the top
   std::vector<float> depth;   // linear view depth, row 0 at the top, +inf where nothing was hit
   std::vector<float> normals; // xyz per pixel (world), zero where nothing was hit
   std::vector<uint32_t> cells; // the index + 1 of the cell that drew the pixel, 0 where none (kReadCells)
+  std::vector<uint8_t> shadowed; // 1 where the pixel's point is in its cell's own shadow (kReadShadow, settings.shadows)
   FrameStats stats;
   double milliseconds = 0;    // == stats.cpuMs
   uint32_t cellsDrawn = 0;    // boxes ray-cast (front + inside)
@@ -141,7 +146,7 @@ class Renderer {
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
   bool hasColor_ = false, hasNormals_ = false;
-  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0;
+  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0;
   double spacing_ = 0;
 };
 

@@ -248,17 +248,35 @@ void drawPanel(AppState& s, GLFWwindow* win) {
   ImGui::Text("boxes %u drawn, %u culled, %u splats", s.stats.drawn, s.stats.culled, s.stats.splats);
   ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
   if (ImGui::CollapsingHeader("Surface", ImGuiTreeNodeFlags_DefaultOpen)) {
-    int mode = s.rs.mode == RenderMode::kPoints ? 1 : 0;
-    const char* modes[] = {"parallax (height fields)", "points (source splats)"};
-    if (ImGui::Combo("mode", &mode, modes, 2)) {
-      if (mode == 1 && !s.renderer->hasPoints()) {
+    // Every mode of the registry; one the pack has not baked draws its fallback (said below).
+    const auto modes = allModes();
+    int mode = 0;
+    for (size_t i = 0; i < modes.size(); ++i)
+      if (modes[i].mode == s.rs.mode) mode = int(i);
+    std::vector<const char*> names;
+    for (const ModeInfo& m : modes) names.push_back(m.name);
+    if (ImGui::Combo("mode", &mode, names.data(), int(names.size()))) {
+      RenderMode want = modes[size_t(mode)].mode;
+      if (want == RenderMode::kPoints && !s.renderer->hasPoints()) {
         Status ls = uploadSourcePoints(s.pack, *s.renderer);
         if (!ls) {
           s.status = ls.message();
-          mode = 0;
+          want = RenderMode::kParallax;
         }
       }
-      s.rs.mode = mode == 1 ? RenderMode::kPoints : RenderMode::kParallax;
+      s.rs.mode = want;
+    }
+    if (s.rs.mode != RenderMode::kPoints && s.renderer->drawnMode(s.rs.mode) != s.rs.mode)
+      ImGui::TextWrapped("not baked into this pack: drawing %s (scanatlas bake PACK --mode %s)",
+                         modeName(s.renderer->drawnMode(s.rs.mode)), modeName(s.rs.mode));
+    ImGui::Checkbox("work counters", &s.rs.countWork);
+    if (s.rs.countWork && s.stats.work.valid) {
+      const WorkCounters& w = s.stats.work;
+      ImGui::Text("%s/ray mean %.1f p50 %u p99 %u max %u", s.stats.drawnMode == RenderMode::kParallax ? "samples" : "nodes",
+                  w.mean(), w.p50, w.p99, w.max);
+      if (w.topLookups)
+        ImGui::Text("vdm lookups %llu: %.1f%% fell back, %.1f%% fast misses", (unsigned long long)w.topLookups,
+                    100.0 * double(w.fallbacks) / double(w.topLookups), 100.0 * double(w.fastMisses) / double(w.topLookups));
     }
     ImGui::SliderInt("iterations", &s.rs.iterations, 1, 64);
     ImGui::Checkbox("frustum cull", &s.rs.cull.frustum);
@@ -276,6 +294,7 @@ void drawPanel(AppState& s, GLFWwindow* win) {
       s.rs.shading = s.shadingChoice == 1 ? Shading::kNormals : s.shadingChoice == 2 ? Shading::kHeight : Shading::kLambert;
     }
     ImGui::Checkbox("head light", &s.rs.headLight);
+    if (!s.rs.headLight) ImGui::Checkbox("self-shadows (second cast toward the light)", &s.rs.shadows);
     if (!s.rs.headLight) {
       static float az = 30.f, el = 45.f;
       bool moved = ImGui::SliderFloat("light azimuth", &az, -180.f, 180.f);

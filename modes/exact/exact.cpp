@@ -376,6 +376,18 @@ bool traceCell(const PackReader& pack, const CellRecord& c, const uint16_t* code
   return trace(pack, c, codes, o, d, t0, t1, tHit, stats);
 }
 
+double surfaceHeight(const PackReader& pack, const CellRecord& c, double u, double v) {
+  const Surface surf(pack, c);
+  const double S[2] = {std::clamp((u - c.box[0]) / (c.box[1] - c.box[0]) * c.tileW, 0.0, double(c.tileW)) + 0.5,
+                       std::clamp((v - c.box[2]) / (c.box[3] - c.box[2]) * c.tileH, 0.0, double(c.tileH)) + 0.5};
+  const int px = std::min(int(std::floor(S[0])), int(c.tileW)), py = std::min(int(std::floor(S[1])), int(c.tileH));
+  const double ax = S[0] - px, ay = S[1] - py;
+  const Patch p = surf.patch(px, py);
+  const Piece& pc = p.piece[p.mixed ? (ax >= 0.5 ? 1 : 0) + (ay >= 0.5 ? 2 : 0) : 0];
+  if (!pc.covered) return std::numeric_limits<double>::quiet_NaN();
+  return (pc.h[0] * (1 - ax) + pc.h[1] * ax) * (1 - ay) + (pc.h[2] * (1 - ax) + pc.h[3] * ax) * ay;
+}
+
 bool traceCellLinear(const PackReader& pack, const CellRecord& c, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
                      double t0, double t1, double& tHit) {
   TraceStats st;

@@ -101,7 +101,7 @@ bool exactPatch(Cell c, ivec2 p, vec2 S0, vec2 dS, float z0, float dz, float ta,
 int exactNodeIndex(float S, float dS) { return dS >= 0.0 ? int(floor(S)) : int(ceil(S)) - 1; }
 
 // work: nodes visited (more than the cap, exact.h maxNodeVisits, when the cap stopped the ray).
-bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
+bool exactTrace(Cell c, int cell, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
   tHit = 0.0;
   ivec2 size = ivec2(c.boxW.zw);
   ivec2 N = size + 1;
@@ -179,3 +179,25 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     }
   }
 }
+
+// Self-shadowing: the traversal from just above hit point p toward the light l (frame, unit).
+bool exactShadowRay(Cell c, int cell, vec3 p, vec3 l) {
+  if (l.z <= 0.0) return true;  // the light is below the cell's plane
+  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
+  vec3 o = p + vec3(0.0, 0.0, 0.05 * min(texel.x, texel.y));
+  vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
+  vec3 t1 = max((bmin - o) / l, (bmax - o) / l);
+  float tExit = min(min(t1.x, t1.y), t1.z);
+  if (tExit <= 0.0) return false;
+  float t;
+  uint work;
+  return exactTrace(c, cell, o, l, 0.0, tExit, t, work);
+}
+
+#ifndef EXACT_NO_CAST
+bool shadowRay(Cell c, int cell, vec3 p, vec3 l) { return exactShadowRay(c, cell, p, l); }
+
+bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
+  return exactTrace(c, cell, o, d, tEnter, tExit, tHit, work);
+}
+#endif

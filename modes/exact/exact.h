@@ -88,6 +88,10 @@ struct TraceStats {
 bool traceCell(const PackReader& pack, const CellRecord& c, const uint16_t* codes, const Eigen::Vector3d& o,
                const Eigen::Vector3d& d, double t0, double t1, double& tHit, TraceStats* stats = nullptr);
 
+// The rendered surface's height at frame point (u, v) of cell c (the shader's sampleHeight, in
+// double), NaN where uncovered.
+double surfaceHeight(const PackReader& pack, const CellRecord& c, double u, double v);
+
 // The same answer without the pyramid: every patch along the ray, in order (tests check the
 // pyramid against it).
 bool traceCellLinear(const PackReader& pack, const CellRecord& c, const Eigen::Vector3d& o, const Eigen::Vector3d& d,

@@ -13,30 +13,10 @@
 #include "heightfield.glsl"
 #include "shading.glsl"
 #include "clip.glsl"
-#include <mode>
-
-#ifdef FRONT_FACES
-layout(depth_less) out float gl_FragDepth;
-#endif
-
-in vec3 vFrame;
-flat in int vCell;
-flat in int vSteps;
-flat in vec3 vCamFrame;
-
-uniform float nearPlane;
-uniform vec3 viewForward;   // world forward axis of the camera
-uniform bool useColor;
-uniform vec3 baseColor;
-
-layout(location = 0) out vec4 outColor;
-layout(location = 1) out float outDepth;  // linear view depth along the forward axis
-layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
-layout(location = 3) out uint outCell;    // the cell's index + 1 (eval, tests: which cell drew a pixel)
-
 // Work counters, read back when asked (bench --json, eval, the panel, tests): [0] rays cast,
 // [1] work summed (march samples or pyramid nodes), [2] the most one ray took, [3] rays stopped
-// by the mode's cap, [4] hits, [8 + k] rays that took k (k >= 255 in the last).
+// by the mode's cap, [4] hits, [5] vdm fallbacks, [6] vdm fast misses, [7] vdm top-face lookups,
+// [8 + k] rays that took k (k >= 255 in the last).
 layout(std430, binding = 5) buffer Counters { uint counters[]; };
 uniform bool countWork;
 uniform uint workCap;
@@ -50,6 +30,32 @@ void count(uint work, bool hit) {
   if (hit) atomicAdd(counters[4], 1u);
   atomicAdd(counters[8u + min(work, 255u)], 1u);
 }
+
+void countEvent(uint k) {
+  if (countWork) atomicAdd(counters[k], 1u);
+}
+
+#include <mode>
+
+#ifdef FRONT_FACES
+layout(depth_less) out float gl_FragDepth;
+#endif
+
+in vec3 vFrame;
+flat in int vCell;
+flat in int vSteps;
+flat in vec3 vCamFrame;
+
+uniform float nearPlane;
+uniform bool shadows;       // self-shadowing: a second cast toward lightDir (shadowRay, the mode's unit)
+uniform vec3 viewForward;   // world forward axis of the camera
+uniform bool useColor;
+uniform vec3 baseColor;
+
+layout(location = 0) out vec4 outColor;
+layout(location = 1) out float outDepth;  // linear view depth along the forward axis
+layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
+layout(location = 3) out uint outCell;    // the cell's index + 1 (eval, tests: which cell drew a pixel)
 
 void main() {
   Cell c = cells[vCell];
@@ -91,8 +97,9 @@ void main() {
   gl_FragDepth = nearPlane / viewDepth;  // reverse-Z, matches `projection`
 
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
+  if (shadows) inShadow = shadowRay(c, vCell, hit, normalize(toFrame(c, lightDir)));
   outColor = vec4(shade(albedo, nWorld, world), 1.0);
   outDepth = viewDepth;
-  outNormal = vec4(normalize(nWorld), 0.0);
+  outNormal = vec4(normalize(nWorld), inShadow ? 1.0 : 0.0);
   outCell = uint(vCell) + 1u;
 }

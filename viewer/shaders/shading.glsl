@@ -5,13 +5,14 @@ uniform float heightLo;    // ramp range, heights along upAxis relative to the c
 uniform float heightHi;
 uniform bool headLight;    // true: the light sits at the eye; false: lightDir
 uniform vec3 lightDir;     // direction toward the light (world), when not a head light
+bool inShadow = false;     // set by the caller: the point's own cell blocks the light (--shadows)
 
 vec3 shadeLambert(vec3 albedo, vec3 normal, vec3 toEye) {
   // Height-field normals face the cell's W side; turn them toward the viewer so the light
   // test is two-sided like the head light's.
   vec3 n = normalize(normal);
   if (dot(n, toEye) < 0.0) n = -n;
-  float ndl = headLight ? abs(dot(n, normalize(toEye))) : max(dot(n, normalize(lightDir)), 0.0);
+  float ndl = headLight ? abs(dot(n, normalize(toEye))) : (inShadow ? 0.0 : max(dot(n, normalize(lightDir)), 0.0));
   return albedo * (0.12 + 0.88 * ndl);
 }
 
