@@ -69,7 +69,7 @@ int cmdBake(int argc, char** argv) {
     req.budget = *v;
   }
   Progress progress(!quiet, "bake", "cells");
-  req.progress = [&](uint64_t done, uint64_t total) { progress("vdm cells", done, total); };
+  req.progress = [&](uint64_t done, uint64_t total) { progress("cells", done, total); };
   std::vector<std::string> report;
   s = bakeModes(in, out, todo, report, req);
   progress.finish();

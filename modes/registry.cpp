@@ -1,10 +1,13 @@
 #include "modes/registry.h"
 
 #include <algorithm>
+#include <chrono>
+#include <stdexcept>
 #include <cstdio>
 #include <cstring>
 
 #include "modes/exact/exact.h"
+#include "modes/gdm/gdm.h"
 #include "modes/vdm/vdm.h"
 
 namespace sa {
@@ -42,6 +45,28 @@ ExtraSection bakeVdm(const PackReader& pack, const BakeRequest& req, std::string
   return s;
 }
 
+ExtraSection bakeGdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto grids = gdm::buildForcedGrids(pack, req.progress);
+  if (!grids.isOk()) {
+    summary = "gdm: " + grids.status().message();
+    throw std::runtime_error(summary);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ExtraSection s = gdm::makeSection(pack, *grids, seconds);
+  uint64_t voxels = 0;
+  size_t built = 0;
+  for (const gdm::CellGrid& g : *grids) {
+    voxels += g.voxels.size();
+    built += g.nx > 0;
+  }
+  char line[300];
+  std::snprintf(line, sizeof(line), "gdm: section GDMV, %.1f MiB, %zu forced cells (%zu built), %llu voxels, in %.1f s", double(s.bytes.size()) / (1 << 20),
+                grids->size(), built, (unsigned long long)voxels, seconds);
+  summary = line;
+  return s;
+}
+
 const ModeInfo kModes[] = {
     {RenderMode::kParallax, "parallax", "linear search + bisection per height field (Lu, Low & Zheng); needs nothing baked",
      nullptr, nullptr, RenderMode::kParallax, nullptr, "parallax_cast.glsl"},
@@ -52,6 +77,10 @@ const ModeInfo kModes[] = {
      "view-dependent displacement (Wang et al. 2003): a per-texel distance per view direction, PCA-compressed, predict -> "
      "verify -> exact traversal; bakes VDMF for the cells in --clip-box or up to --budget (default 256M), and XMAX",
      vdm::kSectionId, bakeVdm, RenderMode::kExact, "exact", "vdm.glsl"},
+    {RenderMode::kGdm, "gdm",
+     "forced cells (not height fields: overhangs, thin parts) drawn from voxel surfels of their source points or triangles "
+     "by a 3-D DDA from any face or from inside; bakes GDMV (reads the pack's sources) and XMAX; other cells draw exact",
+     gdm::kSectionId, bakeGdm, RenderMode::kExact, "exact", "gdm.glsl"},
     {RenderMode::kPoints, "points", "the source points as splats (the baseline; reads the pack's sources)", nullptr, nullptr,
      RenderMode::kPoints, nullptr, nullptr},
 };
@@ -91,6 +120,13 @@ ModeSection modeSection(const PackReader& pack, RenderMode m) {
       s.bytes = v->bytes;
       s.bakeSeconds = v->bakeSeconds;
     }
+  } else if (m == RenderMode::kGdm) {
+    auto v = gdm::readSection(pack);
+    if (v.isOk() && v->present) {
+      s.present = true;
+      s.bytes = v->bytes;
+      s.bakeSeconds = v->header.bakeSeconds;
+    }
   } else if (m == RenderMode::kVdm) {
     auto v = vdm::readSection(pack);
     if (v.isOk() && v->present) {
@@ -123,7 +159,11 @@ Status bakeModes(const std::string& in, const std::string& out, const std::vecto
   std::vector<ExtraSection> add;
   for (RenderMode m : todo) {
     std::string line;
-    add.push_back(modeInfo(m).bake(pack, req, line));
+    try {
+      add.push_back(modeInfo(m).bake(pack, req, line));
+    } catch (const std::runtime_error& e) {  // a bake that cannot run (gdm: sources gone)
+      return Status::badInput(e.what());
+    }
     report.push_back(line);
   }
   if (add.empty() && in == out) return Status::ok();

@@ -14,8 +14,8 @@
 
 namespace sa {
 
-enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3 };
-inline constexpr int kRenderModes = 4;
+enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4 };
+inline constexpr int kRenderModes = 5;
 
 // What a bake may be limited to (modes that bake per cell: vdm).
 struct BakeRequest {

@@ -1,6 +1,7 @@
 #include "viewer/renderer.h"
 
 #include "modes/exact/exact.h"
+#include "modes/gdm/gdm.h"
 #include "modes/vdm/vdm.h"
 
 #define GL_GLEXT_PROTOTYPES 1
@@ -120,6 +121,7 @@ struct Renderer::Gl {
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
   GLuint vdmEntryBuf = 0, vdmWordBuf = 0;            // vdm: per-cell block offsets, the blocks
+  GLuint gdmEntryBuf = 0, gdmWordBuf = 0;            // gdm: per-cell block offsets, the voxel grids
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
   const PackReader* pack = nullptr;   // for streamed pages
@@ -147,8 +149,8 @@ struct Renderer::Gl {
     for (int m = 0; m < kRenderModes; ++m)
       for (GLuint p : {front[m], inside[m]})
         if (p) glDeleteProgram(p);
-    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf, vdmEntryBuf, vdmWordBuf};
-    glDeleteBuffers(5, modeBufs);
+    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf, vdmEntryBuf, vdmWordBuf, gdmEntryBuf, gdmWordBuf};
+    glDeleteBuffers(7, modeBufs);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -283,6 +285,19 @@ Status Renderer::initModes(const PackReader& pack) {
       exactBytes_ = words * 4 + offsets.size() * 4;
       gpuBytes_ += exactBytes_;
     }
+    if (mi.mode == RenderMode::kGdm) {
+      auto v = gdm::readSection(pack);
+      if (!v.isOk()) return v.status();
+      if (!v->present || !g.mipBuf) continue;  // gdm's other cells draw exact
+      glCreateBuffers(1, &g.gdmEntryBuf);
+      glNamedBufferStorage(g.gdmEntryBuf, GLsizeiptr(std::max<size_t>(v->header.cellCount, 1) * 4), v->entries, 0);
+      glCreateBuffers(1, &g.gdmWordBuf);
+      const uint32_t zero = 0;
+      glNamedBufferStorage(g.gdmWordBuf, GLsizeiptr(std::max<uint64_t>(v->header.wordCount, 1) * 4),
+                           v->header.wordCount ? static_cast<const void*>(v->words) : &zero, 0);
+      gdmBytes_ = (uint64_t(v->header.cellCount) + v->header.wordCount) * 4;
+      gpuBytes_ += gdmBytes_;
+    }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
       if (!v.isOk()) return v.status();
@@ -321,7 +336,10 @@ RenderMode Renderer::drawnMode(RenderMode m) const {
 }
 
 uint64_t Renderer::modeGpuBytes(RenderMode m) const {
-  return m == RenderMode::kExact ? exactBytes_ : m == RenderMode::kVdm ? vdmBytes_ + exactBytes_ : 0;
+  return m == RenderMode::kExact ? exactBytes_
+         : m == RenderMode::kVdm ? vdmBytes_ + exactBytes_
+         : m == RenderMode::kGdm ? gdmBytes_ + exactBytes_
+                                 : 0;
 }
 
 void WorkCounters::percentiles() {
@@ -691,9 +709,13 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.mipBuf);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, g.mipOffBuf);
   }
-  if (g.vdmWordBuf) {
+  // Bindings 6 and 7: the drawn mode's own data (GL guarantees only 8 storage-buffer bindings).
+  if (st.drawnMode == RenderMode::kVdm) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.vdmEntryBuf);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.vdmWordBuf);
+  } else if (st.drawnMode == RenderMode::kGdm) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
   }
 
   glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);

@@ -146,7 +146,7 @@ class Renderer {
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
   bool hasColor_ = false, hasNormals_ = false;
-  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0;
+  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0;
   double spacing_ = 0;
 };
 

@@ -245,6 +245,21 @@ TEST(Cli, ModesBakeInfoBenchAndFallback) {
   EXPECT_EQ(ex["work"]["unit"].get<std::string>(), "nodes");
   EXPECT_EQ(ex["work"]["capped"].get<int>(), 0);
   EXPECT_EQ(run("pack " + d.file("ico.ply") + " -o " + d.file("x.hfa") + " --modes frobnicate").code, 2);
+
+  // gdm builds from the pack's sources: gone sources are a clear error and the pack is untouched.
+  ASSERT_EQ(run("pack " + d.file("ico.ply") + " -o " + d.file("g.hfa") + " --max-depth 0 -q").code, 0);  // one forced cell
+  const auto before = nlohmann::json::parse(run("info " + d.file("g.hfa") + " --json").out)["bytes"];
+  std::filesystem::rename(d.file("ico.ply"), d.file("moved.ply"));
+  CmdResult gone = runErr("bake " + d.file("g.hfa") + " --mode gdm", d.file("err.txt"));
+  EXPECT_EQ(gone.code, 2);
+  EXPECT_NE(gone.err.find("is gone"), std::string::npos) << gone.err;
+  EXPECT_EQ(nlohmann::json::parse(run("info " + d.file("g.hfa") + " --json").out)["bytes"], before);
+  std::filesystem::rename(d.file("moved.ply"), d.file("ico.ply"));
+  ASSERT_EQ(run("bake " + d.file("g.hfa") + " --mode gdm -q").code, 0);
+  auto gj = nlohmann::json::parse(run("info " + d.file("g.hfa") + " --json").out);
+  for (const auto& m : gj["modes"])
+    if (m["mode"] == "gdm" || m["mode"] == "exact") EXPECT_TRUE(m["present"].get<bool>()) << m.dump();
+  EXPECT_EQ(run("verify " + d.file("g.hfa")).code, 0);
 }
 
 TEST(Cli, KilledPackLeavesNoHalfWrittenPackAndIsCleanedUpNextTime) {

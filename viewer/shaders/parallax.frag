@@ -35,6 +35,10 @@ void countEvent(uint k) {
   if (countWork) atomicAdd(counters[k], 1u);
 }
 
+// A mode whose surface is not the height field (gdm's surfels) sets the hit's normal here (frame).
+vec3 castNormal = vec3(0.0, 0.0, 1.0);
+bool castHasNormal = false;
+
 #include <mode>
 
 #ifdef FRONT_FACES
@@ -82,7 +86,9 @@ void main() {
     discard;
 
   vec3 nWorld;
-  if (storedNormals) {
+  if (castHasNormal) {
+    nWorld = c.axisU.xyz * castNormal.x + c.axisV.xyz * castNormal.y + c.axisW.xyz * castNormal.z;
+  } else if (storedNormals) {
     nWorld = sampleNormal(c, hit.xy);
   } else {
     vec3 nFrame = gradientNormal(c, hit.xy);

@@ -1,0 +1,353 @@
+#include "modes/gdm/gdm.h"
+
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <mutex>
+#include <sstream>
+#include <unordered_map>
+
+#include "formats/source.h"
+
+namespace sa::gdm {
+namespace {
+
+struct Acc {
+  uint32_t count = 0;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero(), nsum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+  uint32_t normals = 0;
+};
+
+Eigen::Vector3d gridMin(const CellRecord& c) { return {c.box[0], c.box[2], c.box[4]}; }
+
+}  // namespace
+
+uint32_t encodeVoxel(const Eigen::Vector3d& normal, double offset, const Eigen::Vector3d& vs) {
+  const Eigen::Vector3d n = normal.normalized();
+  const double s = std::abs(n.x()) + std::abs(n.y()) + std::abs(n.z());
+  double px = n.x() / s, py = n.y() / s;
+  if (n.z() < 0) {
+    const double fx = (1 - std::abs(py)) * (px < 0 ? -1 : 1), fy = (1 - std::abs(px)) * (py < 0 ? -1 : 1);
+    px = fx;
+    py = fy;
+  }
+  const uint32_t ex = uint32_t(std::lround((px + 1) * 127.5)), ey = uint32_t(std::lround((py + 1) * 127.5));
+  const double half = 0.5 * vs.norm();
+  const int32_t q = int32_t(std::lround(std::clamp(offset / half, -1.0, 1.0) * 32767));
+  uint32_t v = (ex & 255u) | ((ey & 255u) << 8) | (uint32_t(uint16_t(int16_t(q))) << 16);
+  return v ? v : 1u;  // 0 means empty
+}
+
+void decodeVoxel(uint32_t v, const Eigen::Vector3d& vs, Eigen::Vector3d& normal, double& offset) {
+  const double px = double(v & 255u) / 127.5 - 1, py = double((v >> 8) & 255u) / 127.5 - 1;
+  double z = 1 - std::abs(px) - std::abs(py), x = px, y = py;
+  if (z < 0) {
+    x = (1 - std::abs(py)) * (px < 0 ? -1 : 1);
+    y = (1 - std::abs(px)) * (py < 0 ? -1 : 1);
+  }
+  normal = Eigen::Vector3d(x, y, z).normalized();
+  offset = double(int16_t(uint16_t(v >> 16))) / 32767 * 0.5 * vs.norm();
+}
+
+CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double spacing) {
+  CellGrid g;
+  g.cell = cell;
+  g.nx = c.tileW;
+  g.ny = c.tileH;
+  g.vx = (c.box[1] - c.box[0]) / g.nx;
+  g.vy = (c.box[3] - c.box[2]) / g.ny;
+  const double h = c.box[5] - c.box[4];
+  g.vz = std::max(std::min(g.vx, g.vy), 1e-300);
+  g.nz = h > 0 ? std::clamp(int(std::ceil(h / g.vz)), 1, 1024) : 1;
+  if (h > 0) g.vz = h / g.nz;
+  if (!(g.vx > 0 && g.vy > 0) || uint64_t(g.nx) * g.ny * g.nz > (uint64_t(1) << 24)) {
+    g.nx = g.ny = g.nz = 0;  // degenerate or too large: the cell draws its fallback
+    return g;
+  }
+  const Eigen::Vector3d vs(g.vx, g.vy, g.vz), lo = gridMin(c);
+  const int N[3] = {g.nx, g.ny, g.nz};
+  std::unordered_map<uint64_t, Acc> acc;
+  const double r = spacing > 0 ? 0.75 * spacing : 0;
+  for (size_t i = 0; i < s.p.size(); ++i) {
+    const Eigen::Vector3d& p = s.p[i];
+    int a0[3], a1[3];
+    for (int k = 0; k < 3; ++k) {
+      a0[k] = std::clamp(int(std::floor((p[k] - r - lo[k]) / vs[k])), 0, N[k] - 1);
+      a1[k] = std::clamp(int(std::floor((p[k] + r - lo[k]) / vs[k])), 0, N[k] - 1);
+    }
+    for (int z = a0[2]; z <= a1[2]; ++z)
+      for (int y = a0[1]; y <= a1[1]; ++y)
+        for (int x = a0[0]; x <= a1[0]; ++x) {
+          if (r > 0) {  // the voxel's box within r of the sample
+            const Eigen::Vector3d bmin = lo + Eigen::Vector3d(x, y, z).cwiseProduct(vs), bmax = bmin + vs;
+            if ((p.cwiseMax(bmin).cwiseMin(bmax) - p).squaredNorm() > r * r) continue;
+          }
+          Acc& A = acc[(uint64_t(z) * g.ny + y) * g.nx + x];
+          ++A.count;
+          A.sum += p;
+          A.outer += p * p.transpose();
+          if (s.n[i].squaredNorm() > 0) {
+            A.nsum += (A.normals && A.nsum.dot(s.n[i]) < 0 ? -1.0 : 1.0) * s.n[i];
+            ++A.normals;
+          }
+        }
+  }
+  g.voxels.assign(size_t(g.nx) * g.ny * g.nz, 0);
+  for (const auto& [key, A] : acc) {
+    const Eigen::Vector3d mean = A.sum / A.count;
+    Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+    if (A.normals && A.nsum.norm() > 0.5 * A.normals) {
+      n = A.nsum.normalized();
+    } else if (A.count >= 3) {  // both sides of a thin part, or no normals: the samples' plane
+      const Eigen::Matrix3d cov = A.outer / A.count - mean * mean.transpose();
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+      n = eig.eigenvectors().col(0);
+    } else if (A.normals) {
+      n = A.nsum.normalized();
+    }
+    const uint64_t x = key % g.nx, y = (key / g.nx) % g.ny, z = key / (uint64_t(g.nx) * g.ny);
+    const Eigen::Vector3d centre = lo + (Eigen::Vector3d(double(x), double(y), double(z)) + Eigen::Vector3d::Constant(0.5)).cwiseProduct(vs);
+    g.voxels[key] = encodeVoxel(n, n.dot(mean - centre), vs);
+  }
+  return g;
+}
+
+bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
+           double& tHit, Eigen::Vector3d* normal, uint32_t* steps) {
+  if (g.nx == 0 || !(t0 <= t1)) return false;
+  const Eigen::Vector3d vs(g.vx, g.vy, g.vz), lo = gridMin(c);
+  const int N[3] = {g.nx, g.ny, g.nz};
+  const Eigen::Vector3d p = o + d * t0 - lo;
+  int idx[3], step[3];
+  double tMax[3], tDelta[3];
+  for (int k = 0; k < 3; ++k) {
+    idx[k] = std::clamp(int(std::floor(p[k] / vs[k])), 0, N[k] - 1);
+    step[k] = d[k] > 0 ? 1 : (d[k] < 0 ? -1 : 0);
+    tDelta[k] = d[k] != 0 ? vs[k] / std::abs(d[k]) : INFINITY;
+    tMax[k] = d[k] != 0 ? t0 + ((idx[k] + (step[k] > 0 ? 1 : 0)) * vs[k] - p[k]) / d[k] : INFINITY;
+  }
+  const double margin = 0.25 * vs.minCoeff();
+  double t = t0;
+  uint32_t n = 0;
+  for (; n < uint32_t(g.nx + g.ny + g.nz + 4); ++n) {
+    const int a = tMax[0] <= tMax[1] ? (tMax[0] <= tMax[2] ? 0 : 2) : (tMax[1] <= tMax[2] ? 1 : 2);
+    const double tNext = std::min(std::max(tMax[a], t), t1);
+    const uint32_t v = g.at(idx[0], idx[1], idx[2]);
+    if (v) {
+      Eigen::Vector3d nn;
+      double off;
+      decodeVoxel(v, vs, nn, off);
+      const Eigen::Vector3d centre = lo + (Eigen::Vector3d(idx[0], idx[1], idx[2]) + Eigen::Vector3d::Constant(0.5)).cwiseProduct(vs);
+      const double den = d.dot(nn);
+      if (std::abs(den) > 1e-12) {
+        const double tp = (off - (o - centre).dot(nn)) / den;
+        if (tp >= t - margin && tp <= tNext + margin && tp >= t0 && tp <= t1) {
+          tHit = tp;
+          if (normal) *normal = den > 0 ? -nn : nn;
+          if (steps) *steps = n + 1;
+          return true;
+        }
+      }
+    }
+    if (tNext >= t1) break;
+    idx[a] += step[a];
+    if (idx[a] < 0 || idx[a] >= N[a]) break;
+    t = tNext;
+    tMax[a] += tDelta[a];
+  }
+  if (steps) *steps = n + 1;
+  return false;
+}
+
+namespace {
+
+// The pack's sources, relative to its origin: points (with normals where the files have them)
+// and, for a single mesh file, its triangles.
+class Collect : public BatchSink {
+ public:
+  explicit Collect(const double origin[3]) { std::copy(origin, origin + 3, o_); }
+  Status onPoints(const PointBatch& b) override {
+    for (size_t i = 0; i < b.size(); ++i) {
+      p.emplace_back(b.x[i] - o_[0], b.y[i] - o_[1], b.z[i] - o_[2]);
+      n.push_back(b.hasNormals() ? Eigen::Vector3d(b.nx[i], b.ny[i], b.nz[i]) : Eigen::Vector3d::Zero());
+    }
+    return Status::ok();
+  }
+  Status onTriangles(const uint32_t* idx, size_t count) override {
+    tris.insert(tris.end(), idx, idx + 3 * count);
+    return Status::ok();
+  }
+  std::vector<Eigen::Vector3d> p, n;
+  std::vector<uint32_t> tris;
+
+ private:
+  double o_[3];
+};
+
+std::vector<std::string> sourcesOf(const PackReader& pack, std::string& columns) {
+  std::vector<std::string> out;
+  std::istringstream in(pack.note());
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("source: ", 0) == 0) out.push_back(line.substr(8));
+    if (line.rfind("columns: ", 0) == 0) columns = line.substr(9);
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, const std::function<void(uint64_t, uint64_t)>& progress) {
+  std::vector<uint32_t> forced;
+  auto cells = pack.cells();
+  for (uint32_t i = 0; i < cells.size(); ++i)
+    if (cells[i].flags & kCellForced) forced.push_back(i);
+  std::vector<CellGrid> grids(forced.size());
+  if (forced.empty()) return grids;
+  std::string columns;
+  const auto sources = sourcesOf(pack, columns);
+  if (sources.empty()) return Status::badInput(pack.path() + ": the pack names no source files (NOTE); gdm builds from them");
+  for (const auto& s : sources)
+    if (!std::filesystem::exists(s))
+      return Status::badInput(pack.path() + ": source file " + s + " is gone; gdm builds its voxels from the sources");
+  auto input = InputSet::open(sources, columns);
+  if (!input) return input.status();
+  Collect all(pack.meta().origin);
+  const bool meshes = sources.size() == 1 && input->hasTriangles();
+  SA_RETURN_IF_ERROR(input->stream(all, meshes));
+  const double spacing = pack.meta().sampleSpacing;
+  std::atomic<uint64_t> done{0};
+  std::mutex m;
+  tbb::parallel_for(size_t(0), forced.size(), [&](size_t k) {
+    const CellRecord& c = cells[forced[k]];
+    const Eigen::Vector3d O(c.origin), U(c.u), V(c.v), W(c.w);
+    const double vx = (c.box[1] - c.box[0]) / c.tileW, vy = (c.box[3] - c.box[2]) / c.tileH;
+    const double pad = 0.75 * spacing + std::max(vx, vy);
+    auto frame = [&](const Eigen::Vector3d& p) { const Eigen::Vector3d r = p - O; return Eigen::Vector3d(r.dot(U), r.dot(V), r.dot(W)); };
+    auto inside = [&](const Eigen::Vector3d& f) {
+      return f.x() >= c.box[0] - pad && f.x() <= c.box[1] + pad && f.y() >= c.box[2] - pad && f.y() <= c.box[3] + pad &&
+             f.z() >= c.box[4] - pad && f.z() <= c.box[5] + pad;
+    };
+    Samples s;
+    if (meshes && !all.tris.empty()) {
+      const double step = 0.5 * std::min(vx, vy);
+      for (size_t t = 0; t + 2 < all.tris.size(); t += 3) {
+        const Eigen::Vector3d a = frame(all.p[all.tris[t]]), b = frame(all.p[all.tris[t + 1]]), cc = frame(all.p[all.tris[t + 2]]);
+        const Eigen::Vector3d lo = a.cwiseMin(b).cwiseMin(cc), hi = a.cwiseMax(b).cwiseMax(cc);
+        if (hi.x() < c.box[0] - pad || lo.x() > c.box[1] + pad || hi.y() < c.box[2] - pad || lo.y() > c.box[3] + pad ||
+            hi.z() < c.box[4] - pad || lo.z() > c.box[5] + pad)
+          continue;
+        const Eigen::Vector3d fn = (b - a).cross(cc - a);
+        if (fn.squaredNorm() == 0) continue;
+        const int m = std::clamp(int(std::ceil(std::max({(b - a).norm(), (cc - a).norm(), (cc - b).norm()}) / step)), 1, 512);
+        for (int i = 0; i <= m; ++i)
+          for (int j = 0; i + j <= m; ++j) {
+            const Eigen::Vector3d q = a + (b - a) * (double(i) / m) + (cc - a) * (double(j) / m);
+            if (!inside(q)) continue;
+            s.p.push_back(q);
+            s.n.push_back(fn.normalized());
+          }
+      }
+      grids[k] = buildGrid(c, forced[k], s, 0);
+    } else {
+      for (size_t i = 0; i < all.p.size(); ++i) {
+        const Eigen::Vector3d f = frame(all.p[i]);
+        if (!inside(f)) continue;
+        s.p.push_back(f);
+        const Eigen::Vector3d& nw = all.n[i];
+        s.n.push_back(nw.squaredNorm() > 0 ? Eigen::Vector3d(nw.dot(U), nw.dot(V), nw.dot(W)) : Eigen::Vector3d::Zero());
+      }
+      grids[k] = buildGrid(c, forced[k], s, spacing);
+    }
+    const uint64_t d = ++done;
+    if (progress) {
+      std::lock_guard<std::mutex> lock(m);
+      progress(d, forced.size());
+    }
+  });
+  return grids;
+}
+
+ExtraSection makeSection(const PackReader& pack, const std::vector<CellGrid>& grids, double bakeSeconds) {
+  std::vector<uint32_t> entries(pack.cells().size(), kNoEntry), words;
+  uint32_t count = 0;
+  for (const CellGrid& g : grids) {
+    if (g.nx == 0) continue;
+    entries[g.cell] = uint32_t(words.size());
+    const float v[3] = {float(g.vx), float(g.vy), float(g.vz)};
+    uint32_t vb[3];
+    std::memcpy(vb, v, 12);
+    const uint32_t head[kBlockHeaderWords] = {uint32_t(g.nx), uint32_t(g.ny), uint32_t(g.nz), vb[0], vb[1], vb[2], 0, 0};
+    words.insert(words.end(), head, head + kBlockHeaderWords);
+    words.insert(words.end(), g.voxels.begin(), g.voxels.end());
+    ++count;
+  }
+  SectionHeader h{};
+  h.version = kSectionVersion;
+  h.cellCount = uint32_t(pack.cells().size());
+  h.gridCells = count;
+  h.bakeSeconds = bakeSeconds;
+  h.wordCount = words.size();
+  ExtraSection s;
+  std::memcpy(s.id, kSectionId, 4);
+  s.bytes.resize(sizeof(h) + 4 * (entries.size() + words.size()));
+  std::memcpy(s.bytes.data(), &h, sizeof(h));
+  std::memcpy(s.bytes.data() + sizeof(h), entries.data(), 4 * entries.size());
+  if (!words.empty()) std::memcpy(s.bytes.data() + sizeof(h) + 4 * entries.size(), words.data(), 4 * words.size());
+  return s;
+}
+
+Result<SectionView> readSection(const PackReader& pack) {
+  const std::span<const uint8_t> b = pack.section(kSectionId);
+  SectionView v;
+  if (b.empty()) return v;
+  const std::string where = pack.path() + ": section GDMV (the gdm mode's voxels): ";
+  if (b.size() < sizeof(SectionHeader)) return Status::badInput(where + "too short");
+  std::memcpy(&v.header, b.data(), sizeof(SectionHeader));
+  const SectionHeader& h = v.header;
+  if (h.version != kSectionVersion) return Status::badInput(where + "another version; bake it again: scanatlas bake PACK --mode gdm");
+  if (h.cellCount != pack.cells().size()) return Status::badInput(where + "made for another cell table (bake it again)");
+  if (h.wordCount > b.size() / 4 || sizeof(SectionHeader) + 4 * (uint64_t(h.cellCount) + h.wordCount) != b.size())
+    return Status::badInput(where + "its size does not match its header");
+  v.entries = reinterpret_cast<const uint32_t*>(b.data() + sizeof(SectionHeader));
+  v.words = v.entries + h.cellCount;
+  for (uint32_t i = 0; i < h.cellCount; ++i) {
+    const uint32_t e = v.entries[i];
+    if (e == kNoEntry) continue;
+    if (uint64_t(e) + kBlockHeaderWords > h.wordCount) return Status::badInput(where + "cell " + std::to_string(i) + " lies outside");
+    const uint32_t* blk = v.words + e;
+    const CellRecord& c = pack.cells()[i];
+    if (blk[0] != c.tileW || blk[1] != c.tileH || blk[2] == 0 || blk[2] > 1024 ||
+        uint64_t(e) + kBlockHeaderWords + uint64_t(blk[0]) * blk[1] * blk[2] > h.wordCount)
+      return Status::badInput(where + "cell " + std::to_string(i) + "'s block is inconsistent (bake it again)");
+  }
+  v.present = true;
+  v.bytes = b.size();
+  return v;
+}
+
+CellGrid gridFromSection(const PackReader& pack, const SectionView& v, uint32_t cell) {
+  (void)pack;
+  CellGrid g;
+  g.cell = cell;
+  const uint32_t* blk = v.words + v.entries[cell];
+  g.nx = int(blk[0]);
+  g.ny = int(blk[1]);
+  g.nz = int(blk[2]);
+  float f[3];
+  std::memcpy(f, blk + 3, 12);
+  g.vx = f[0];
+  g.vy = f[1];
+  g.vz = f[2];
+  g.voxels.assign(blk + kBlockHeaderWords, blk + kBlockHeaderWords + size_t(g.nx) * g.ny * g.nz);
+  return g;
+}
+
+}  // namespace sa::gdm
