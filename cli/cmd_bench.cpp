@@ -234,7 +234,7 @@ int cmdBench(int argc, char** argv) {
       c.settings.mode = m;
       c.settings.iterations = it;
       configs.push_back(c);
-      if (m == RenderMode::kExact) break;  // no linear steps: one configuration
+      if (m != RenderMode::kParallax) break;  // no linear steps: one configuration
     }
   }
   if (a.flag("compare-skips")) {

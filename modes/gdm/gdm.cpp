@@ -120,7 +120,8 @@ CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double 
 }
 
 bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
-           double& tHit, Eigen::Vector3d* normal, uint32_t* steps) {
+           double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched) {
+  if (touched) *touched = false;
   if (g.nx == 0 || !(t0 <= t1)) return false;
   const Eigen::Vector3d vs(g.vx, g.vy, g.vz), lo = gridMin(c);
   const int N[3] = {g.nx, g.ny, g.nz};
@@ -141,6 +142,7 @@ bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, con
     const double tNext = std::min(std::max(tMax[a], t), t1);
     const uint32_t v = g.at(idx[0], idx[1], idx[2]);
     if (v) {
+      if (touched) *touched = true;
       Eigen::Vector3d nn;
       double off;
       decodeVoxel(v, vs, nn, off);
@@ -257,6 +259,8 @@ Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, const std
       }
       grids[k] = buildGrid(c, forced[k], s, 0);
     } else {
+      // The raw points: the pack's outlier removal and smoothing are not applied here (measured:
+      // both take away or merge the two sides of thin parts, the case gdm is for).
       for (size_t i = 0; i < all.p.size(); ++i) {
         const Eigen::Vector3d f = frame(all.p[i]);
         if (!inside(f)) continue;

@@ -1,7 +1,9 @@
 // The `gdm` mode's cast (modes/gdm/gdm.cpp `trace` is the same rule on the CPU): a cell with a
 // voxel grid (a forced cell) is traversed voxel by voxel (Amanatides & Woo) from where the ray
 // enters the box - any face, or the camera inside - and the first voxel whose surfel plane the
-// ray meets within the voxel is the hit; its normal shades. Other cells: the exact traversal.
+// ray meets within the voxel is the hit; its normal shades. A ray that passes no occupied voxel
+// at all (samples too sparse for surfels: scan edges, cracks the pack's pull-push closed) takes
+// the cell's height field instead. Other cells: the exact traversal.
 #define EXACT_NO_CAST 1
 #include "exact.glsl"
 
@@ -18,8 +20,11 @@ vec3 gdmNormal(uint v, vec3 vs, out float offset) {
   return normalize(vec3(xy, z));
 }
 
-bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tHit, out vec3 nHit, out uint steps) {
+// touched: the ray passed an occupied voxel (whether or not it met the surfel).
+bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tHit, out vec3 nHit, out uint steps,
+              out bool touched) {
   tHit = 0.0;
+  touched = false;
   nHit = vec3(0.0, 0.0, 1.0);
   ivec3 N = ivec3(gdmWord[blk], gdmWord[blk + 1u], gdmWord[blk + 2u]);
   vec3 vs = vec3(uintBitsToFloat(gdmWord[blk + 3u]), uintBitsToFloat(gdmWord[blk + 4u]), uintBitsToFloat(gdmWord[blk + 5u]));
@@ -41,6 +46,7 @@ bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tH
     float tNext = min(max(tMax[a], t), t1);
     uint v = gdmWord[base + uint((idx.z * N.y + idx.y) * N.x + idx.x)];
     if (v != 0u) {
+      touched = true;
       float off;
       vec3 nn = gdmNormal(v, vs, off);
       vec3 centre = lo + (vec3(idx) + 0.5) * vs;
@@ -67,11 +73,16 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
   uint blk = gdmEntry[cell];
   if (blk == 0xffffffffu) return exactTrace(c, cell, o, d, tEnter, tExit, tHit, work);
   vec3 n;
-  bool found = gdmTrace(c, blk, o, d, tEnter, tExit, tHit, n, work);
-  if (found) {
+  bool touched;
+  if (gdmTrace(c, blk, o, d, tEnter, tExit, tHit, n, work, touched)) {
     castNormal = n;
     castHasNormal = true;
+    return true;
   }
+  if (touched) return false;  // it passed surfels and met none: nothing there
+  uint nodes;
+  bool found = exactTrace(c, cell, o, d, tEnter, tExit, tHit, nodes);
+  work += nodes;
   return found;
 }
 
@@ -87,5 +98,6 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   float t;
   vec3 n;
   uint steps;
-  return gdmTrace(c, blk, p, l, start, tExit, t, n, steps);
+  bool touched;
+  return gdmTrace(c, blk, p, l, start, tExit, t, n, steps, touched);
 }

@@ -43,9 +43,11 @@ struct Samples {
 // reaches the voxels within 0.75 of it; 0 for triangle samples, which reach their own voxel).
 CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double spacing);
 
-// First surfel along o + t d (frame), t in [t0, t1]; normal (frame, facing the ray's origin).
+// First surfel along o + t d (frame), t in [t0, t1]; normal (frame, facing the ray's origin);
+// touched: whether the ray passed an occupied voxel (the shader draws the cell's height field
+// where it passed none).
 bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
-           double& tHit, Eigen::Vector3d* normal = nullptr, uint32_t* steps = nullptr);
+           double& tHit, Eigen::Vector3d* normal = nullptr, uint32_t* steps = nullptr, bool* touched = nullptr);
 
 // Reads the pack's sources (NOTE) and builds every forced cell's grid. progress(done, total).
 Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack,
