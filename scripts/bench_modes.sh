@@ -23,8 +23,8 @@ declare -A ref=([bunny]="$data/stanford_bunny/reconstruction/bun_zipper.ply"
                 [dragon]="$data/stanford_dragon/reconstruction/dragon_vrip.ply")
 for m in bunny dragon; do
   $sa pack "${src[$m]}" -o "$out/$m.hfa" --modes exact -q
-  $sa bake "$out/$m.hfa" --mode vdm --budget "$budget" -q
-  $sa bake "$out/$m.hfa" --mode gdm -q
+  $sa bake "$out/$m.hfa" --mode vdm --budget "$budget" --force -q
+  $sa bake "$out/$m.hfa" --mode gdm --force -q
   $sa info "$out/$m.hfa" --json > "$out/info_$m.json"
   echo "== bench $m" >&2
   $sa bench "$out/$m.hfa" --orbit 8 --size "${size}x${size}" --warmup 2 --frames 16 --mode parallax,exact,vdm,gdm \
