@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <stdexcept>
 #include <cstdio>
 #include <cstring>
 
@@ -13,7 +12,7 @@
 namespace sa {
 namespace {
 
-ExtraSection bakeExact(const PackReader& pack, const BakeRequest&, std::string& summary) {
+Result<ExtraSection> bakeExact(const PackReader& pack, const BakeRequest&, std::string& summary) {
   double seconds = 0;
   ExtraSection s = exact::bakeSection(pack, &seconds);
   char line[160];
@@ -24,7 +23,7 @@ ExtraSection bakeExact(const PackReader& pack, const BakeRequest&, std::string& 
 
 inline constexpr uint64_t kVdmDefaultBudget = uint64_t(256) << 20;
 
-ExtraSection bakeVdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
+Result<ExtraSection> bakeVdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
   vdm::Selection sel;
   sel.clip = req.clip;
   sel.lo = req.lo;
@@ -45,13 +44,10 @@ ExtraSection bakeVdm(const PackReader& pack, const BakeRequest& req, std::string
   return s;
 }
 
-ExtraSection bakeGdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
+Result<ExtraSection> bakeGdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
   const auto t0 = std::chrono::steady_clock::now();
   auto grids = gdm::buildForcedGrids(pack, req.progress);
-  if (!grids.isOk()) {
-    summary = "gdm: " + grids.status().message();
-    throw std::runtime_error(summary);
-  }
+  if (!grids.isOk()) return grids.status();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ExtraSection s = gdm::makeSection(pack, *grids, seconds);
   uint64_t voxels = 0;
@@ -159,11 +155,9 @@ Status bakeModes(const std::string& in, const std::string& out, const std::vecto
   std::vector<ExtraSection> add;
   for (RenderMode m : todo) {
     std::string line;
-    try {
-      add.push_back(modeInfo(m).bake(pack, req, line));
-    } catch (const std::runtime_error& e) {  // a bake that cannot run (gdm: sources gone)
-      return Status::badInput(e.what());
-    }
+    auto section = modeInfo(m).bake(pack, req, line);
+    if (!section.isOk()) return section.status();  // nothing is written (gdm: the sources are gone)
+    add.push_back(std::move(*section));
     report.push_back(line);
   }
   if (add.empty() && in == out) return Status::ok();

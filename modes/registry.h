@@ -17,7 +17,7 @@ namespace sa {
 enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4 };
 inline constexpr int kRenderModes = 5;
 
-// What a bake may be limited to (modes that bake per cell: vdm).
+// What a bake may be limited to (modes that bake per cell: vdm) and how it reports progress.
 struct BakeRequest {
   bool clip = false;  // only cells whose box meets [lo, hi] (world coordinates)
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
@@ -31,7 +31,7 @@ struct ModeInfo {
   const char* summary;      // one line for --help and info
   const char* sectionId;    // the section its bake writes, null when it needs none
   // Builds the section from a pack (null when nothing is baked); summary: one line for the user.
-  ExtraSection (*bake)(const PackReader& pack, const BakeRequest& req, std::string& summary);
+  Result<ExtraSection> (*bake)(const PackReader& pack, const BakeRequest& req, std::string& summary);
   RenderMode needsMode;      // a mode whose section this one also needs (its own mode when none)
   const char* fallback;     // what a pack without the section draws instead
   const char* castUnit;     // the shader unit defining castCell (embedded by name), null for points

@@ -237,16 +237,9 @@ Status runCommand(AppState& s, GLFWwindow* win, const ScriptCommand& c, bool& qu
   return Status::ok();
 }
 
-void drawPanel(AppState& s, GLFWwindow* win) {
-  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
-  ImGui::SetNextWindowSize(ImVec2(330, 560), ImGuiCond_FirstUseEver);
-  ImGui::Begin("ScanAtlas");
-  std::vector<float> ft(s.frameMs.begin(), s.frameMs.end());
-  const float last = ft.empty() ? 0.f : ft.back();
-  ImGui::Text("%.1f ms  %.1f fps", last, last > 0 ? 1000.f / last : 0.f);
-  if (!ft.empty()) ImGui::PlotLines("##ft", ft.data(), int(ft.size()), 0, "frame ms", 0.f, 100.f, ImVec2(300, 50));
-  ImGui::Text("boxes %u drawn, %u culled, %u splats", s.stats.drawn, s.stats.culled, s.stats.splats);
-  ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
+// The panel's surface section: the mode menu (every mode of the registry, what a pack without its
+// section draws instead), the work counters, the march settings and the skips.
+void drawSurfacePanel(AppState& s) {
   if (ImGui::CollapsingHeader("Surface", ImGuiTreeNodeFlags_DefaultOpen)) {
     // Every mode of the registry; one the pack has not baked draws its fallback (said below).
     const auto modes = allModes();
@@ -287,6 +280,19 @@ void drawPanel(AppState& s, GLFWwindow* win) {
     ImGui::Checkbox("splats", &s.rs.cull.subpixelSplats);
     ImGui::Checkbox("cell boxes (coloured by plane orientation)", &s.rs.showBoxes);
   }
+}
+
+void drawPanel(AppState& s, GLFWwindow* win) {
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowSize(ImVec2(330, 560), ImGuiCond_FirstUseEver);
+  ImGui::Begin("ScanAtlas");
+  std::vector<float> ft(s.frameMs.begin(), s.frameMs.end());
+  const float last = ft.empty() ? 0.f : ft.back();
+  ImGui::Text("%.1f ms  %.1f fps", last, last > 0 ? 1000.f / last : 0.f);
+  if (!ft.empty()) ImGui::PlotLines("##ft", ft.data(), int(ft.size()), 0, "frame ms", 0.f, 100.f, ImVec2(300, 50));
+  ImGui::Text("boxes %u drawn, %u culled, %u splats", s.stats.drawn, s.stats.culled, s.stats.splats);
+  ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
+  drawSurfacePanel(s);
   if (ImGui::CollapsingHeader("Shading", ImGuiTreeNodeFlags_DefaultOpen)) {
     const char* modes[] = {"Lambert, head light", "normals", "height ramp", "scan colour"};
     if (ImGui::Combo("shading", &s.shadingChoice, modes, 4)) {
