@@ -66,9 +66,12 @@ const char* kHelp =
     "  --force                repack even if OUT already holds a pack of the same input and options\n"
     "                         (checked by a hash of the input bytes and options, stored in the pack)\n"
     "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
-    "  --modes LIST           also bake what these surface-detail modes need (comma-separated;\n"
-    "                         'exact' stores its maxima, about 2/3 of the heights' bytes); modes\n"
-    "                         that need nothing are accepted and cost nothing. Later: scanatlas bake\n"
+    "  --modes LIST           also bake what these surface-detail modes need (comma-separated):\n"
+    "                         exact (max-mipmap maxima, ~2.8 bytes a texel), vdm (view-dependent\n"
+    "                         distances for the cells within its default 256M budget, and exact's),\n"
+    "                         gdm (voxel surfels of the forced cells from the sources, and exact's);\n"
+    "                         parallax and points need nothing. Later, with a region or a budget:\n"
+    "                         scanatlas bake OUT.hfa --mode vdm --clip-box ... | --budget SIZE\n"
     "  --json                 print the summary as JSON on stdout\n"
     "  -q, --quiet            no progress and no summary\n";
 
