@@ -263,6 +263,18 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   return Status::ok();
 }
 
+// A mode section's per-cell entry table and its blocks of words (vdm, gdm) as two storage
+// buffers; returns their bytes.
+static uint64_t uploadBlocks(uint32_t cellCount, const uint32_t* entries, uint64_t wordCount, const uint32_t* words,
+                             GLuint& entryBuf, GLuint& wordBuf) {
+  glCreateBuffers(1, &entryBuf);
+  glNamedBufferStorage(entryBuf, GLsizeiptr(std::max<size_t>(cellCount, 1) * 4), entries, 0);
+  glCreateBuffers(1, &wordBuf);
+  const uint32_t zero = 0;
+  glNamedBufferStorage(wordBuf, GLsizeiptr(std::max<uint64_t>(wordCount, 1) * 4), wordCount ? static_cast<const void*>(words) : &zero, 0);
+  return (uint64_t(cellCount) + wordCount) * 4;
+}
+
 // Every surface mode this pack can draw: its programs and its baked sections on the GPU.
 Status Renderer::initModes(const PackReader& pack) {
   Gl& g = *gl_;
@@ -289,26 +301,14 @@ Status Renderer::initModes(const PackReader& pack) {
       auto v = gdm::readSection(pack);
       if (!v.isOk()) return v.status();
       if (!v->present || !g.mipBuf) continue;  // gdm's other cells draw exact
-      glCreateBuffers(1, &g.gdmEntryBuf);
-      glNamedBufferStorage(g.gdmEntryBuf, GLsizeiptr(std::max<size_t>(v->header.cellCount, 1) * 4), v->entries, 0);
-      glCreateBuffers(1, &g.gdmWordBuf);
-      const uint32_t zero = 0;
-      glNamedBufferStorage(g.gdmWordBuf, GLsizeiptr(std::max<uint64_t>(v->header.wordCount, 1) * 4),
-                           v->header.wordCount ? static_cast<const void*>(v->words) : &zero, 0);
-      gdmBytes_ = (uint64_t(v->header.cellCount) + v->header.wordCount) * 4;
+      gdmBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.gdmEntryBuf, g.gdmWordBuf);
       gpuBytes_ += gdmBytes_;
     }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
       if (!v.isOk()) return v.status();
       if (!v->present || !g.mipBuf) continue;  // vdm needs exact's maxima for its fallback
-      glCreateBuffers(1, &g.vdmEntryBuf);
-      glNamedBufferStorage(g.vdmEntryBuf, GLsizeiptr(std::max<size_t>(v->header.cellCount, 1) * 4), v->entries, 0);
-      glCreateBuffers(1, &g.vdmWordBuf);
-      const uint32_t zero = 0;
-      glNamedBufferStorage(g.vdmWordBuf, GLsizeiptr(std::max<uint64_t>(v->header.wordCount, 1) * 4),
-                           v->header.wordCount ? static_cast<const void*>(v->words) : &zero, 0);
-      vdmBytes_ = (uint64_t(v->header.cellCount) + v->header.wordCount) * 4;
+      vdmBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.vdmEntryBuf, g.vdmWordBuf);
       gpuBytes_ += vdmBytes_;
     }
     const int k = int(mi.mode);

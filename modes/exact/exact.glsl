@@ -183,11 +183,8 @@ bool exactTrace(Cell c, int cell, vec3 o, vec3 d, float tEnter, float tExit, out
 // Self-shadowing: the traversal from just above hit point p toward the light l (frame, unit).
 bool exactShadowRay(Cell c, int cell, vec3 p, vec3 l) {
   if (l.z <= 0.0) return true;  // the light is below the cell's plane
-  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
-  vec3 o = p + vec3(0.0, 0.0, 0.05 * min(texel.x, texel.y));
-  vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
-  vec3 t1 = max((bmin - o) / l, (bmax - o) / l);
-  float tExit = min(min(t1.x, t1.y), t1.z);
+  vec3 o;
+  float tExit = shadowRayExit(c, p, l, o);
   if (tExit <= 0.0) return false;
   float t;
   uint work;

@@ -135,6 +135,16 @@ vec3 sampleColor(Cell c, vec2 uv) {
   return texelFetch(colorPages, ivec3(c.tile.yz + n, c.tile.x), 0).rgb;
 }
 
+// A self-shadow ray from hit point p toward the light l (frame, unit, l.z > 0): its start o just
+// above p, and where it leaves the box.
+float shadowRayExit(Cell c, vec3 p, vec3 l, out vec3 o) {
+  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
+  o = p + vec3(0.0, 0.0, 0.05 * min(texel.x, texel.y));
+  vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
+  vec3 t1 = max((bmin - o) / l, (bmax - o) / l);
+  return min(min(t1.x, t1.y), t1.z);
+}
+
 // The coverage edge between tOut (uncovered) and tIn (covered), by bisection to well under a
 // texel: returns a covered t next to the edge.
 float coverageEdge(Cell c, vec3 o, vec3 d, float tOut, float tIn) {
