@@ -1,5 +1,7 @@
 #include "preprocess/normals.h"
 
+#include "preprocess/grid_knn.h"
+
 #include <flann/flann.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -15,18 +17,6 @@ namespace {
 
 using KdTree = flann::Index<flann::L2_Simple<double>>;
 
-// k nearest neighbours (the point itself included) of points [begin, end), row per point.
-void knn(KdTree& tree, const double* pos, size_t begin, size_t end, int k, std::vector<int>& ind,
-         std::vector<double>& dist) {
-  const size_t m = end - begin;
-  ind.resize(m * size_t(k));
-  dist.resize(m * size_t(k));
-  flann::Matrix<int> mi(ind.data(), m, size_t(k));
-  flann::Matrix<double> md(dist.data(), m, size_t(k));
-  flann::Matrix<double> q(const_cast<double*>(pos + 3 * begin), m, 3);
-  tree.knnSearch(q, mi, md, k, flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
-}
-
 Eigen::Vector3d towardOf(const NormalOrientation& orient, size_t i, const Eigen::Vector3d& p) {
   if (!orient.towardScanner.empty() && orient.scan) {
     const uint16_t s = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + i * orient.scanStride);
@@ -36,25 +26,6 @@ Eigen::Vector3d towardOf(const NormalOrientation& orient, size_t i, const Eigen:
 }
 
 constexpr int kDensityNeighbours = 8;
-
-// Per point: the mean distance to its kDensityNeighbours nearest neighbours (local density).
-std::vector<float> meanNeighbourDistance(KdTree& tree, const double* pos, size_t n) {
-  std::vector<float> out(n, 0.f);
-  const int k = static_cast<int>(std::min<size_t>(kDensityNeighbours + 1, n));
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    std::vector<int> ind;
-    std::vector<double> dist;
-    knn(tree, pos, r.begin(), r.end(), k, ind, dist);
-    for (size_t a = 0; a < r.size(); ++a) {
-      double sum = 0;
-      int cnt = 0;
-      for (int j = 1; j < k; ++j)  // [0] is the point itself
-        if (ind[a * k + j] >= 0) sum += std::sqrt(dist[a * k + j]), ++cnt;
-      out[r.begin() + a] = cnt ? float(sum / cnt) : 0.f;
-    }
-  });
-  return out;
-}
 
 // One point's neighbourhood: the moving-least-squares surface (Alexa et al. 2003; PCL's MLS
 // with its "simple" projection): a Gaussian-weighted plane, then a weighted quadric height
@@ -148,57 +119,56 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   keep.assign(n, 1);
   if (n == 0) return 0;
   const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
-  // The kd-tree indexes a copy: smoothed positions are written back only when every point is done.
+  // The grid indexes a copy: smoothed positions are written back only when every point is done.
   std::vector<double> src(pos, pos + 3 * n);
-  flann::Matrix<double> data(src.data(), n, 3);
-  KdTree tree(data, flann::KDTreeSingleIndexParams(15));
-  tree.buildIndex();
-  const std::vector<float> density = opt.outlierRatio > 0 ? meanNeighbourDistance(tree, src.data(), n) : std::vector<float>();
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    std::vector<int> ind;
-    std::vector<double> dist;
-    knn(tree, src.data(), r.begin(), r.end(), k, ind, dist);
-    std::vector<float> around(static_cast<size_t>(k));
-    for (size_t a = 0; a < r.size(); ++a) {
-      const size_t i = r.begin() + a;
-      const int* in = &ind[a * size_t(k)];
-      const Eigen::Vector3d p(&src[3 * i]);
-      if (localSpacing) {
-        const int j = std::min(k - 1, kDensityNeighbours);  // [0] is the point itself
-        localSpacing[i] = float(std::sqrt(dist[a * size_t(k) + size_t(j)] * M_PI / std::max(j, 1)));
-      }
-      if (!density.empty()) {
-        // Outlier: much farther from its neighbours than they are from theirs (a local test,
-        // so sparse but real regions - water returns, a scan's fringe - stay).
-        size_t m = 0;
-        for (int j = 1; j < k; ++j)
-          if (in[j] >= 0) around[m++] = density[size_t(in[j])];
-        if (m > 0) {
-          std::nth_element(around.begin(), around.begin() + long(m / 2), around.begin() + long(m));
-          if (density[i] > opt.outlierRatio * around[m / 2]) {
-            keep[i] = 0;
-            continue;
-          }
+  const Spacing sp = estimateSpacing(src.data(), n);
+  const GridKnn grid(src.data(), n, GridKnn::cellFor(sp.area > 0 ? sp.area : sp.nearest, k));
+  std::vector<float> density;
+  if (opt.outlierRatio > 0) {  // per point: the mean distance to its kDensityNeighbours nearest (local density)
+    density.assign(n, 0.f);
+    grid.forEach(int(std::min<size_t>(kDensityNeighbours + 1, n)), [&](size_t i, const int*, const double* d2, int m) {
+      double sum = 0;
+      for (int j = 1; j < m; ++j) sum += std::sqrt(d2[j]);  // [0] is the point itself
+      density[i] = m > 1 ? float(sum / (m - 1)) : 0.f;
+    });
+  }
+  grid.forEach(k, [&](size_t i, const int* in, const double* dist, int m) {
+    const Eigen::Vector3d p(&src[3 * i]);
+    if (localSpacing) {
+      const int j = std::min(m - 1, kDensityNeighbours);  // [0] is the point itself
+      localSpacing[i] = float(std::sqrt(dist[j] * M_PI / std::max(j, 1)));
+    }
+    if (!density.empty()) {
+      // Outlier: much farther from its neighbours than they are from theirs (a local test,
+      // so sparse but real regions - water returns, a scan's fringe - stay).
+      std::array<float, 256> around;
+      size_t c = 0;
+      for (int j = 1; j < m && c < around.size(); ++j) around[c++] = density[size_t(in[j])];
+      if (c > 0) {
+        std::nth_element(around.begin(), around.begin() + long(c / 2), around.begin() + long(c));
+        if (density[i] > opt.outlierRatio * around[c / 2]) {
+          keep[i] = 0;
+          return;
         }
       }
-      const LocalSurface ls = fitLocal(src.data(), p, in, &dist[a * size_t(k)], k);
-      float* out = &nrm[3 * i];
-      const Eigen::Vector3d given(out[0], out[1], out[2]);
-      if (!ls.ok) {
-        if (opt.estimateNormals) out[0] = out[1] = out[2] = 0.f;  // unknown
-        continue;
-      }
-      // Smooth only where the neighbourhood is a surface and the move is small against it
-      // (layers, vegetation and sharp features keep their points where they are).
-      const double move = (ls.projected - p).norm();
-      if (opt.smooth && ls.residual < 0.25 * ls.radius && move < 0.5 * ls.radius)
-        for (int c = 0; c < 3; ++c) pos[3 * i + c] = ls.projected[c];
-      Eigen::Vector3d nn = ls.normal;
-      const Eigen::Vector3d toward = given.squaredNorm() > 0.25 && !opt.estimateNormals ? given : towardOf(orient, i, p);
-      if (nn.dot(toward) < 0) nn = -nn;
-      if (opt.estimateNormals || opt.smooth)
-        for (int c = 0; c < 3; ++c) out[c] = float(nn[c]);
     }
+    const LocalSurface ls = fitLocal(src.data(), p, in, dist, m);
+    float* out = &nrm[3 * i];
+    const Eigen::Vector3d given(out[0], out[1], out[2]);
+    if (!ls.ok) {
+      if (opt.estimateNormals) out[0] = out[1] = out[2] = 0.f;  // unknown
+      return;
+    }
+    // Smooth only where the neighbourhood is a surface and the move is small against it
+    // (layers, vegetation and sharp features keep their points where they are).
+    const double move = (ls.projected - p).norm();
+    if (opt.smooth && ls.residual < 0.25 * ls.radius && move < 0.5 * ls.radius)
+      for (int c = 0; c < 3; ++c) pos[3 * i + c] = ls.projected[c];
+    Eigen::Vector3d nn = ls.normal;
+    const Eigen::Vector3d toward = given.squaredNorm() > 0.25 && !opt.estimateNormals ? given : towardOf(orient, i, p);
+    if (nn.dot(toward) < 0) nn = -nn;
+    if (opt.estimateNormals || opt.smooth)
+      for (int c = 0; c < 3; ++c) out[c] = float(nn[c]);
   });
   return size_t(std::count(keep.begin(), keep.end(), 0));
 }

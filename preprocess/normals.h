@@ -1,6 +1,7 @@
-// Neighbour queries with FLANN (kd-tree): outlier removal, normal estimation and moving-least-
-// squares smoothing over the k nearest neighbours, and the sample-spacing estimate that sets
-// texel sizes and coverage radii.
+// Neighbour queries: outlier removal, normal estimation and moving-least-squares smoothing over
+// the k nearest neighbours (GridKnn, a uniform grid: faster than a kd-tree on scan surfaces),
+// and the sample-spacing estimate that sets texel sizes and coverage radii (FLANN on a few
+// sub-cubes).
 #pragma once
 #include <cstddef>
 #include <cstdint>

@@ -1,0 +1,223 @@
+#include "preprocess/grid_knn.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace sa {
+namespace {
+
+constexpr int kBits = 21;
+constexpr int64_t kMaxDim = int64_t(1) << 20;
+constexpr int kMaxRing = 3;  // beyond: every cell, pruned by its distance
+
+uint64_t hashKey(uint64_t k) { return k * 0x9E3779B97F4A7C15ull; }
+
+}  // namespace
+
+double GridKnn::cellFor(double spacing, int k) { return 1.3 * spacing * std::sqrt(std::max(k, 1) / M_PI); }
+
+GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell) {
+  double hi[3];
+  for (int a = 0; a < 3; ++a) lo_[a] = std::numeric_limits<double>::infinity(), hi[a] = -lo_[a];
+  for (size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) lo_[a] = std::min(lo_[a], pos[3 * i + a]), hi[a] = std::max(hi[a], pos[3 * i + a]);
+  double extent = 0;
+  for (int a = 0; a < 3; ++a) extent = n ? std::max(extent, hi[a] - lo_[a]) : 0;
+  if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;
+  if (extent / cell_ >= double(kMaxDim - 1)) cell_ = extent / double(kMaxDim - 2);
+  for (int a = 0; a < 3; ++a) dims_[a] = n ? int64_t(std::floor((hi[a] - lo_[a]) / cell_)) + 1 : 1;
+  std::vector<std::pair<uint64_t, uint32_t>> keyed(n);
+  for (size_t i = 0; i < n; ++i) {
+    int64_t c[3];
+    coords(i, c);
+    keyed[i] = {keyOf(c[0], c[1], c[2]), uint32_t(i)};
+  }
+  std::sort(keyed.begin(), keyed.end());
+  order_.resize(n);
+  sorted_.resize(3 * n);
+  for (size_t i = 0; i < n; ++i) {
+    order_[i] = keyed[i].second;
+    for (int a = 0; a < 3; ++a) sorted_[3 * i + a] = pos[3 * size_t(keyed[i].second) + a];
+    if (i == 0 || keyed[i].first != keyed[i - 1].first) cells_.push_back({keyed[i].first, uint32_t(i), uint32_t(i)});
+    cells_.back().end = uint32_t(i + 1);
+  }
+  size_t size = 16;
+  while (size < 2 * cells_.size()) size *= 2;
+  mask_ = size - 1;
+  table_.assign(size, -1);
+  for (size_t c = 0; c < cells_.size(); ++c) {
+    uint64_t h = (hashKey(cells_[c].key) >> 20) & mask_;
+    while (table_[h] >= 0) h = (h + 1) & mask_;
+    table_[h] = int64_t(c);
+  }
+}
+
+uint64_t GridKnn::keyOf(int64_t x, int64_t y, int64_t z) const {
+  return uint64_t(x) | (uint64_t(y) << kBits) | (uint64_t(z) << (2 * kBits));
+}
+
+void GridKnn::coords(size_t i, int64_t c[3]) const {
+  for (int a = 0; a < 3; ++a)
+    c[a] = std::clamp(int64_t(std::floor((pos_[3 * i + a] - lo_[a]) / cell_)), int64_t(0), dims_[a] - 1);
+}
+
+int64_t GridKnn::findCell(uint64_t key) const {
+  uint64_t h = (hashKey(key) >> 20) & mask_;
+  while (table_[h] >= 0) {
+    if (cells_[size_t(table_[h])].key == key) return table_[h];
+    h = (h + 1) & mask_;
+  }
+  return -1;
+}
+
+void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
+  out.index.clear();
+  out.xyz.clear();
+  int64_t a[3], b[3];
+  for (int k = 0; k < 3; ++k) a[k] = std::max<int64_t>(0, c[k] - ring), b[k] = std::min(dims_[k] - 1, c[k] + ring);
+  for (int64_t z = a[2]; z <= b[2]; ++z)
+    for (int64_t y = a[1]; y <= b[1]; ++y)
+      for (int64_t x = a[0]; x <= b[0]; ++x) {
+        const int64_t ci = findCell(keyOf(x, y, z));
+        if (ci < 0) continue;
+        const Cell& cc = cells_[size_t(ci)];
+        out.index.insert(out.index.end(), order_.begin() + cc.begin, order_.begin() + cc.end);
+        out.xyz.insert(out.xyz.end(), sorted_.begin() + 3 * long(cc.begin), sorted_.begin() + 3 * long(cc.end));
+      }
+}
+
+// The k smallest (d2, index) of point i over `cand` into scratch (ascending), then, where the
+// candidates cannot prove it (the k-th lies beyond the gathered block), wider rings and at last
+// every cell, pruned by distance.
+void GridKnn::nearest(size_t i, const Candidates& cand, int k,
+                      std::vector<std::pair<double, uint32_t>>& best) const {
+  const double* p = pos_ + 3 * i;
+  auto collect = [&](const Candidates& from) {
+    best.resize(from.index.size());
+    const double* q = from.xyz.data();
+    for (size_t j = 0; j < best.size(); ++j, q += 3) {
+      const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
+      best[j] = {dx * dx + dy * dy + dz * dz, from.index[j]};
+    }
+    const size_t m = std::min(best.size(), size_t(k));
+    if (m < best.size()) std::nth_element(best.begin(), best.begin() + long(m - 1), best.end());
+    best.resize(m);
+    std::sort(best.begin(), best.end());
+  };
+  collect(cand);
+  int64_t c[3];
+  coords(i, c);
+  const size_t want = std::min(n_, size_t(k));
+  // Distance from p to the outside of the block of cells within `ring` (infinite where the block
+  // reaches the grid's edge on both sides of an axis).
+  auto proven = [&](int ring) {
+    double g = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      if (c[a] - ring > 0) g = std::min(g, p[a] - (lo_[a] + double(c[a] - ring) * cell_));
+      if (c[a] + ring < dims_[a] - 1) g = std::min(g, lo_[a] + double(c[a] + ring + 1) * cell_ - p[a]);
+    }
+    return best.size() == want && (std::isinf(g) || best.back().first < g * g);
+  };
+  if (proven(1)) return;
+  Candidates more;
+  for (int ring = 2; ring <= kMaxRing; ++ring) {
+    gather(c, ring, more);
+    collect(more);
+    if (proven(ring)) return;
+  }
+  // Far from everything (an outlier, a sparse fringe): every cell that can hold a closer point.
+  for (const Cell& cc : cells_) {
+    const int64_t x = int64_t(cc.key & ((1u << kBits) - 1)), y = int64_t((cc.key >> kBits) & ((1u << kBits) - 1)),
+                  z = int64_t(cc.key >> (2 * kBits));
+    const int64_t cx[3] = {x, y, z};
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double b0 = lo_[a] + double(cx[a]) * cell_, b1 = b0 + cell_;
+      const double d = p[a] < b0 ? b0 - p[a] : (p[a] > b1 ? p[a] - b1 : 0);
+      d2 += d * d;
+    }
+    if (best.size() == want && d2 > best.back().first) continue;
+    for (uint32_t o = cc.begin; o < cc.end; ++o) {
+      const uint32_t j = order_[o];
+      const double* q = &sorted_[3 * size_t(o)];
+      const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
+      const std::pair<double, uint32_t> e(dx * dx + dy * dy + dz * dz, j);
+      if (std::find(best.begin(), best.end(), e) != best.end()) continue;
+      if (best.size() < want) {
+        best.push_back(e);
+      } else if (e < best.back()) {
+        best.back() = e;
+      } else {
+        continue;
+      }
+      std::sort(best.begin(), best.end());
+    }
+  }
+}
+
+void GridKnn::forEach(int k, const Visit& fn) const {
+  if (n_ == 0 || k <= 0) return;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, cells_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+    Candidates cand;
+    std::vector<std::pair<double, uint32_t>> best;
+    std::vector<int> ind(static_cast<size_t>(k));
+    std::vector<double> d2(static_cast<size_t>(k));
+    for (size_t ci = r.begin(); ci != r.end(); ++ci) {
+      const Cell& cc = cells_[ci];
+      int64_t c[3];
+      coords(order_[cc.begin], c);
+      gather(c, 1, cand);
+      for (uint32_t o = cc.begin; o < cc.end; ++o) {
+        const size_t i = order_[o];
+        nearest(i, cand, k, best);
+        for (size_t j = 0; j < best.size(); ++j) ind[j] = int(best[j].second), d2[j] = best[j].first;
+        fn(i, ind.data(), d2.data(), int(best.size()));
+      }
+    }
+  });
+}
+
+void GridKnn::within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out) const {
+  out.clear();
+  if (n_ == 0 || !(radius >= 0)) return;
+  int64_t a[3], b[3];
+  for (int k = 0; k < 3; ++k) {
+    const double lo = std::floor((q[k] - radius - lo_[k]) / cell_), hi = std::floor((q[k] + radius - lo_[k]) / cell_);
+    if (!(hi >= 0 && lo <= double(dims_[k] - 1))) return;  // the ball misses the grid (or q is NaN)
+    a[k] = lo < 0 ? 0 : int64_t(lo);
+    b[k] = hi > double(dims_[k] - 1) ? dims_[k] - 1 : int64_t(hi);
+  }
+  const double r2 = radius * radius;
+  for (int64_t z = a[2]; z <= b[2]; ++z)
+    for (int64_t y = a[1]; y <= b[1]; ++y)
+      for (int64_t x = a[0]; x <= b[0]; ++x) {
+        const int64_t ci = findCell(keyOf(x, y, z));
+        if (ci < 0) continue;
+        const Cell& cc = cells_[size_t(ci)];
+        for (uint32_t o = cc.begin; o < cc.end; ++o) {
+          const double* p = &sorted_[3 * size_t(o)];
+          const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
+          const double d2 = dx * dx + dy * dy + dz * dz;
+          if (d2 <= r2) out.emplace_back(d2, order_[o]);
+        }
+      }
+  std::sort(out.begin(), out.end());
+}
+
+void GridKnn::query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const {
+  ind.clear(), d2.clear();
+  if (i >= n_ || k <= 0) return;
+  int64_t c[3];
+  coords(i, c);
+  Candidates cand;
+  gather(c, 1, cand);
+  std::vector<std::pair<double, uint32_t>> best;
+  nearest(i, cand, k, best);
+  for (const auto& e : best) ind.push_back(int(e.second)), d2.push_back(e.first);
+}
+
+}  // namespace sa

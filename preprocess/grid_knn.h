@@ -1,0 +1,72 @@
+// Exact k-nearest-neighbour queries of every point of a chunk against the chunk itself, on a
+// uniform grid instead of a kd-tree (issue "Scale": FLANN's per-point search was ~40 % of packing
+// a LAS without normals). Scan points lie on surfaces, so with a cell about as wide as the k-th
+// neighbour's distance the 3x3x3 block around a point's cell holds its k nearest neighbours and
+// a few dozen more; the block is gathered once per cell and shared by every point in it. A point
+// whose k-th candidate lies farther than the block guarantees (sparse fringes, outliers) widens
+// its own search ring by ring until the answer is exact.
+//
+// Results equal a brute-force search: the k smallest squared distances, ties broken by the
+// lower index, so a chunk's neighbourhoods do not depend on thread scheduling.
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+namespace sa {
+
+class GridKnn {
+ public:
+  // pos: n xyz-interleaved points (kept by reference: must outlive the index). cell: the grid's
+  // cell side (> 0; widened where the extent would need more than 2^20 cells per axis).
+  GridKnn(const double* pos, size_t n, double cell);
+
+  // A cell side for k neighbours on a surface sampled with area spacing `spacing` (the side
+  // of the area per point): the k-th neighbour usually lies within it.
+  static double cellFor(double spacing, int k);
+
+  // Calls fn(i, ind, d2, m) for every point i, on every core: ind/d2 its m = min(k, n) nearest
+  // points (the point itself first unless it has duplicates of lower index) and their squared
+  // distances, ascending. fn runs concurrently for different points.
+  using Visit = std::function<void(size_t i, const int* ind, const double* d2, int m)>;
+  void forEach(int k, const Visit& fn) const;
+
+  // Every point within `radius` of q (any position, inside the grid or not) as (d2, index),
+  // ascending. Thread-safe.
+  void within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out) const;
+
+  // The same for one point (tests; the slow path).
+  void query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const;
+
+  double cell() const { return cell_; }
+
+ private:
+  struct Cell {
+    uint64_t key;
+    uint32_t begin, end;  // into order_
+  };
+  int64_t findCell(uint64_t key) const;
+  uint64_t keyOf(int64_t x, int64_t y, int64_t z) const;
+  void coords(size_t i, int64_t c[3]) const;
+  struct Candidates {
+    std::vector<uint32_t> index;
+    std::vector<double> xyz;  // their positions, contiguous (the loop over them stays in cache)
+  };
+  // Candidates in the cube of cells within `ring` of cell c (ring 1: 3x3x3).
+  void gather(const int64_t c[3], int ring, Candidates& out) const;
+  void nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best) const;
+
+  const double* pos_;
+  size_t n_;
+  double cell_;
+  double lo_[3];
+  int64_t dims_[3];
+  std::vector<uint32_t> order_;  // point indices sorted by cell
+  std::vector<double> sorted_;   // their positions in that order
+  std::vector<Cell> cells_;
+  std::vector<int64_t> table_;  // open addressing: cell index or -1
+  uint64_t mask_ = 0;
+};
+
+}  // namespace sa

@@ -1,0 +1,159 @@
+// GridKnn (the chunk's k-nearest-neighbour search that replaced FLANN in normal estimation)
+// against brute force: the same neighbours, in the same order, on surfaces, noise, clusters with
+// far outliers, duplicates, lines, fewer points than k, a cell size far off, and the raw bunny.
+#include "preprocess/grid_knn.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <mutex>
+#include <random>
+
+#include "../common/test_util.h"
+#include "formats/source.h"
+#include "preprocess/normals.h"
+
+namespace sa {
+namespace {
+
+// The k smallest (d2, index) of point i, brute force.
+std::vector<std::pair<double, uint32_t>> brute(const std::vector<double>& pos, size_t i, int k) {
+  std::vector<std::pair<double, uint32_t>> all;
+  const size_t n = pos.size() / 3;
+  for (size_t j = 0; j < n; ++j) {
+    const double dx = pos[3 * j] - pos[3 * i], dy = pos[3 * j + 1] - pos[3 * i + 1], dz = pos[3 * j + 2] - pos[3 * i + 2];
+    all.emplace_back(dx * dx + dy * dy + dz * dz, uint32_t(j));
+  }
+  const size_t m = std::min(all.size(), size_t(k));
+  std::partial_sort(all.begin(), all.begin() + long(m), all.end());
+  all.resize(m);
+  return all;
+}
+
+// Every point's forEach answer (sampled: every `stride`-th) equals brute force; returns how many were checked.
+size_t checkAll(const std::vector<double>& pos, double cell, int k, size_t stride = 1) {
+  const GridKnn g(pos.data(), pos.size() / 3, cell);
+  std::atomic<size_t> visits{0}, checked{0};
+  std::mutex m;
+  std::vector<std::string> bad;
+  g.forEach(k, [&](size_t i, const int* ind, const double* d2, int cnt) {
+    ++visits;
+    if (i % stride) return;
+    ++checked;
+    const auto want = brute(pos, i, k);
+    bool same = size_t(cnt) == want.size();
+    for (int j = 0; same && j < cnt; ++j) same = uint32_t(ind[j]) == want[size_t(j)].second && d2[j] == want[size_t(j)].first;
+    if (!same) {
+      std::lock_guard<std::mutex> l(m);
+      if (bad.size() < 5) bad.push_back("point " + std::to_string(i) + ": " + std::to_string(cnt) + " found, " +
+                                        std::to_string(want.size()) + " expected or a neighbour differs");
+    }
+  });
+  EXPECT_EQ(visits.load(), pos.size() / 3) << "every point visited once";
+  for (const auto& b : bad) ADD_FAILURE() << b;
+  return checked.load();
+}
+
+std::vector<double> noisySurface(size_t n, double noise, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> e(0, noise);
+  std::vector<double> pos;
+  for (size_t i = 0; i < n; ++i) {
+    const double x = u(rng), y = u(rng);
+    pos.insert(pos.end(), {x, y, 0.1 * std::sin(6 * x) * std::cos(5 * y) + e(rng)});
+  }
+  return pos;
+}
+
+TEST(GridKnn, NoisySurfaceMatchesBruteForce) {
+  const auto pos = noisySurface(6000, 0.002, 1);
+  const double spacing = 1.0 / std::sqrt(6000.0);
+  for (int k : {1, 9, 24})
+    for (double f : {0.2, 1.0, 4.0})  // cell far too small, as chosen, far too large
+      EXPECT_GT(checkAll(pos, f * GridKnn::cellFor(spacing, k), k, 3), 0u) << "k " << k << " cell factor " << f;
+}
+
+TEST(GridKnn, ClustersOutliersDuplicatesAndLines) {
+  std::mt19937_64 rng(2);
+  std::normal_distribution<double> e(0, 0.01);
+  std::vector<double> pos;
+  for (int c = 0; c < 3; ++c)  // three tight clusters far apart
+    for (int i = 0; i < 400; ++i) pos.insert(pos.end(), {10.0 * c + e(rng), e(rng), e(rng)});
+  for (int i = 0; i < 6; ++i) pos.insert(pos.end(), {5.0 + 40 * i, 7.0 * i, -3.0 * i});  // lone outliers
+  for (int i = 0; i < 50; ++i) pos.insert(pos.end(), {1.0, 2.0, 3.0});                  // duplicates: ties by index
+  for (int i = 0; i < 300; ++i) pos.insert(pos.end(), {0.001 * i, 3.0, 0.0});            // a line
+  checkAll(pos, 0.05, 24);
+  checkAll(pos, 0.05, 9);
+}
+
+TEST(GridKnn, FewerPointsThanKAndDegenerateCells) {
+  std::vector<double> pos = {0, 0, 0, 1, 0, 0, 0, 2, 0, 5, 5, 5};
+  checkAll(pos, 0.1, 24);  // all four, sorted
+  checkAll(pos, 0.0, 2);   // no cell size: the grid picks one
+  checkAll(pos, 1e9, 3);   // one cell holds everything
+  std::vector<double> one = {3, 4, 5};
+  checkAll(one, 1.0, 5);
+  const GridKnn empty(nullptr, 0, 1.0);
+  size_t calls = 0;
+  empty.forEach(5, [&](size_t, const int*, const double*, int) { ++calls; });
+  EXPECT_EQ(calls, 0u);
+}
+
+TEST(GridKnn, HugeExtentKeepsTheGridBounded) {
+  // Two points a light-year apart (in metres) and a cell of a millimetre: the cell widens.
+  std::vector<double> pos = {0, 0, 0, 9.46e15, 0, 0, 1e-3, 0, 0};
+  const GridKnn g(pos.data(), 3, 1e-3);
+  EXPECT_GT(g.cell(), 1e-3);
+  checkAll(pos, 1e-3, 2);
+}
+
+// Radius queries (the margin finder's and the normal field's): every point within r, ascending,
+// from query positions inside, at the edge of and outside the points' extent.
+TEST(GridKnn, WithinMatchesBruteForce) {
+  const auto pos = noisySurface(5000, 0.003, 3);
+  const size_t n = pos.size() / 3;
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> u(-0.2, 1.2);
+  for (double cell : {0.003, 0.03, 0.5}) {
+    const GridKnn g(pos.data(), n, cell);
+    std::vector<std::pair<double, uint32_t>> got;
+    for (int t = 0; t < 300; ++t) {
+      const double q[3] = {u(rng), u(rng), 0.3 * u(rng)};
+      const double r = t % 3 == 0 ? 0.01 : (t % 3 == 1 ? 0.05 : 0.2);
+      g.within(q, r, got);
+      std::vector<std::pair<double, uint32_t>> want;
+      for (size_t j = 0; j < n; ++j) {
+        const double dx = pos[3 * j] - q[0], dy = pos[3 * j + 1] - q[1], dz = pos[3 * j + 2] - q[2];
+        const double d2 = dx * dx + dy * dy + dz * dz;
+        if (d2 <= r * r) want.emplace_back(d2, uint32_t(j));
+      }
+      std::sort(want.begin(), want.end());
+      ASSERT_EQ(got, want) << "cell " << cell << " query " << t << " radius " << r;
+    }
+  }
+}
+
+struct Collect : BatchSink {
+  std::vector<double> xyz;
+  Status onPoints(const PointBatch& b) override {
+    for (size_t i = 0; i < b.size(); ++i) xyz.insert(xyz.end(), {b.x[i], b.y[i], b.z[i]});
+    return Status::ok();
+  }
+};
+
+// The ten raw bunny scans merged (overlaps, misregistration, fringes): every 97th point checked.
+TEST(GridKnnReal, BunnyScansMatchBruteForce) {
+  auto input = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
+  ASSERT_TRUE(input.isOk()) << input.status().message();
+  Collect c;
+  ASSERT_TRUE(input->stream(c, false).isOk());
+  const Spacing s = estimateSpacing(c.xyz.data(), c.xyz.size() / 3);
+  ASSERT_GT(s.area, 0);
+  EXPECT_GT(checkAll(c.xyz, GridKnn::cellFor(s.area, 24), 24, 97), 3000u);
+}
+
+}  // namespace
+}  // namespace sa
