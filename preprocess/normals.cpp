@@ -112,6 +112,80 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   return ls;
 }
 
+// Estimated normals whose sign the orientation cue barely decides (|n . toward| < kWeakCue:
+// walls under an airborne sensor's +z, grazing samples of a range scan, concave parts of a cloud
+// oriented away from its centre) take the sign their oriented neighbours agree on instead,
+// spreading breadth-first from the well-decided ones over the k-nearest-neighbour graph (Hoppe
+// et al. 1992's propagation, limited to the undecided points). A wall thus inherits "outward"
+// from the roof edge and the ground at its foot through their smoothly turning normals.
+constexpr double kWeakCue = 0.25;
+
+size_t propagateOrientation(const GridKnn& grid, const double* src, size_t n, int k, const NormalOrientation& orient,
+                            const std::vector<uint8_t>& keep, float* nrm) {
+  std::vector<int32_t> slot(n, -1);  // index into weak, or -1
+  std::vector<uint32_t> weak;
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f nn(&nrm[3 * i]);
+    if (!keep[i] || nn.squaredNorm() == 0) continue;
+    const Eigen::Vector3d t = towardOf(orient, i, Eigen::Vector3d(&src[3 * i]));
+    const double tl = t.norm();
+    if (tl > 0 && std::abs(nn.cast<double>().dot(t)) >= kWeakCue * tl) continue;
+    slot[i] = int32_t(weak.size());
+    weak.push_back(uint32_t(i));
+  }
+  if (weak.empty()) return 0;
+  std::vector<int> lists(weak.size() * size_t(k), -1);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, weak.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    std::vector<int> ind;
+    std::vector<double> d2;
+    for (size_t a = r.begin(); a != r.end(); ++a) {
+      grid.query(weak[a], k, ind, d2);
+      std::copy(ind.begin(), ind.end(), lists.begin() + long(a * size_t(k)));
+    }
+  });
+  // 0: undecided; 1: decided (by the cue or by neighbours).
+  std::vector<uint8_t> decided(weak.size(), 0);
+  auto vote = [&](size_t a) {
+    const uint32_t i = weak[a];
+    const Eigen::Vector3f ni(&nrm[3 * size_t(i)]);
+    double sum = 0;
+    for (int j = 0; j < k; ++j) {
+      const int q = lists[a * size_t(k) + size_t(j)];
+      if (q < 0 || uint32_t(q) == i || !keep[size_t(q)]) continue;
+      if (slot[size_t(q)] >= 0 && !decided[size_t(slot[size_t(q)])]) continue;
+      sum += ni.dot(Eigen::Vector3f(&nrm[3 * size_t(q)]));
+    }
+    return sum;
+  };
+  size_t flipped = 0;
+  std::vector<size_t> queue;
+  auto decide = [&](size_t a, double v) {
+    if (v < 0) {
+      for (int c = 0; c < 3; ++c) nrm[3 * size_t(weak[a]) + c] = -nrm[3 * size_t(weak[a]) + c];
+      ++flipped;
+    }
+    decided[a] = 1;
+    queue.push_back(a);
+  };
+  // Seeds: undecided points next to decided ones (votes read only the cue-decided, so the seeds
+  // do not depend on their order).
+  std::vector<double> seedVote(weak.size(), 0);
+  for (size_t a = 0; a < weak.size(); ++a) seedVote[a] = vote(a);
+  for (size_t a = 0; a < weak.size(); ++a)
+    if (seedVote[a] != 0) decide(a, seedVote[a]);
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const size_t a = queue[head];
+    for (int j = 0; j < k; ++j) {
+      const int q = lists[a * size_t(k) + size_t(j)];
+      if (q < 0 || slot[size_t(q)] < 0 || decided[size_t(slot[size_t(q)])]) continue;
+      const size_t b = size_t(slot[size_t(q)]);
+      const double v = vote(b);
+      if (v != 0) decide(b, v);
+    }
+  }
+  return flipped;
+}
+
 }  // namespace
 
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
@@ -170,6 +244,7 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
     if (opt.estimateNormals || opt.smooth)
       for (int c = 0; c < 3; ++c) out[c] = float(nn[c]);
   });
+  if (opt.estimateNormals) propagateOrientation(grid, src.data(), n, k, orient, keep, nrm);
   return size_t(std::count(keep.begin(), keep.end(), 0));
 }
 

@@ -714,7 +714,7 @@ Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 5;  // 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks
+  constexpr int kPipelineRevision = 6;  // 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,

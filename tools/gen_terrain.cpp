@@ -17,102 +17,11 @@
 #include <string>
 #include <vector>
 
+#include "tools/terrain_scene.h"
+
 namespace {
 
-constexpr double kSize = 1000;                       // metres, square
-constexpr double kX0 = 636000, kY0 = 848000, kZ0 = 0;  // georeference (metres)
-constexpr double kCell = 50;                           // one building per cell at most
-
-struct Building {
-  double x0, y0, x1, y1, top;
-};
-
-double ground(double x, double y) {
-  return 120 + 18 * std::sin(x / 160) * std::cos(y / 210) + 4 * std::sin(x / 37 + y / 53) + 1.5 * std::cos(x / 11 - y / 17);
-}
-
-void groundNormal(double x, double y, float n[3]) {
-  const double e = 0.01;
-  const double gx = (ground(x + e, y) - ground(x - e, y)) / (2 * e), gy = (ground(x, y + e) - ground(x, y - e)) / (2 * e);
-  const double l = std::sqrt(gx * gx + gy * gy + 1);
-  n[0] = float(-gx / l), n[1] = float(-gy / l), n[2] = float(1 / l);
-}
-
-struct Point {
-  double x, y, z;
-  float n[3];
-  uint16_t rgb[3];
-};
-
-struct Scene {
-  std::vector<Building> b;
-  std::vector<double> wallCum;  // cumulative wall area per building
-  double groundArea = kSize * kSize, wallArea = 0;
-
-  Scene() {
-    std::mt19937_64 rng(7);
-    std::uniform_real_distribution<double> u(0, 1);
-    const int cells = int(kSize / kCell);
-    for (int j = 0; j < cells; ++j)
-      for (int i = 0; i < cells; ++i) {
-        if (u(rng) < 0.55) continue;
-        const double w = 10 + 25 * u(rng), h = 10 + 25 * u(rng);
-        const double x0 = i * kCell + (kCell - w) * u(rng), y0 = j * kCell + (kCell - h) * u(rng);
-        double base = 1e300;
-        for (double a : {0.0, 1.0})
-          for (double c : {0.0, 1.0}) base = std::min(base, ground(x0 + a * w, y0 + c * h));
-        b.push_back({x0, y0, x0 + w, y0 + h, base + 4 + 26 * u(rng) * u(rng)});
-      }
-    for (const Building& k : b) {
-      // Walls from the lowest ground corner up (the part below the ground is never sampled).
-      wallArea += 2 * ((k.x1 - k.x0) + (k.y1 - k.y0)) * (k.top - ground(k.x0, k.y0));
-      wallCum.push_back(wallArea);
-    }
-  }
-
-  const Building* roofAt(double x, double y) const {
-    const int i = int(x / kCell), j = int(y / kCell);
-    for (const Building& k : b)  // few per row: a linear scan over the candidates is enough
-      if (int(k.x0 / kCell) == i && int(k.y0 / kCell) == j && x >= k.x0 && x <= k.x1 && y >= k.y0 && y <= k.y1) return &k;
-    return nullptr;
-  }
-
-  Point sample(std::mt19937_64& rng) const {
-    std::uniform_real_distribution<double> u(0, 1);
-    std::normal_distribution<double> noise(0, 0.03);
-    Point p{};
-    if (u(rng) * (groundArea + wallArea) < wallArea) {
-      const double a = u(rng) * wallArea;
-      size_t k = size_t(std::lower_bound(wallCum.begin(), wallCum.end(), a) - wallCum.begin());
-      const Building& w = b[std::min(k, b.size() - 1)];
-      const double per = 2 * ((w.x1 - w.x0) + (w.y1 - w.y0));
-      double s = u(rng) * per;
-      const double lenX = w.x1 - w.x0, lenY = w.y1 - w.y0;
-      if (s < lenX) p.x = w.x0 + s, p.y = w.y0, p.n[1] = -1;
-      else if ((s -= lenX) < lenY) p.x = w.x1, p.y = w.y0 + s, p.n[0] = 1;
-      else if ((s -= lenY) < lenX) p.x = w.x1 - s, p.y = w.y1, p.n[1] = 1;
-      else p.x = w.x0, p.y = w.y1 - (s - lenX), p.n[0] = -1;
-      const double g = ground(p.x, p.y);
-      p.z = g + u(rng) * (w.top - g);
-      p.x += noise(rng) * (p.n[0] != 0), p.y += noise(rng) * (p.n[1] != 0);
-      p.rgb[0] = 52000, p.rgb[1] = 50000, p.rgb[2] = 46000;  // plaster
-      if (p.z < g) p.z = g;
-      return p;
-    }
-    p.x = u(rng) * kSize, p.y = u(rng) * kSize;
-    if (const Building* r = roofAt(p.x, p.y)) {
-      p.z = r->top + noise(rng);
-      p.n[2] = 1;
-      p.rgb[0] = 40000, p.rgb[1] = 14000, p.rgb[2] = 12000;  // tiles
-      return p;
-    }
-    p.z = ground(p.x, p.y) + noise(rng);
-    groundNormal(p.x, p.y, p.n);
-    const double t = std::clamp((p.z - 100) / 45, 0.0, 1.0);
-    p.rgb[0] = uint16_t(18000 + 20000 * t), p.rgb[1] = uint16_t(36000 - 6000 * t), p.rgb[2] = uint16_t(12000 + 8000 * t);
-    return p;
-  }
-};
+using namespace sa::gen;
 
 template <class T>
 void put(std::vector<char>& h, size_t at, T v) {
@@ -136,6 +45,7 @@ int main(int argc, char** argv) {
   }
   const Scene scene;
   const double scale = 0.001;
+  std::vector<char> header;
   if (las) {
     std::vector<char> h(227, 0);
     std::memcpy(h.data(), "LASF", 4);
@@ -151,10 +61,8 @@ int main(int argc, char** argv) {
     put<uint32_t>(h, 111, uint32_t(std::min<unsigned long long>(n, 0xffffffffull)));
     for (int k = 0; k < 3; ++k) put<double>(h, 131 + 8 * k, scale);
     put<double>(h, 155, kX0), put<double>(h, 163, kY0), put<double>(h, 171, kZ0);
-    put<double>(h, 179, kX0 + kSize), put<double>(h, 187, kX0);  // max x, min x
-    put<double>(h, 195, kY0 + kSize), put<double>(h, 203, kY0);
-    put<double>(h, 211, 300.0), put<double>(h, 219, 0.0);
-    std::fwrite(h.data(), 1, h.size(), f);
+    std::fwrite(h.data(), 1, h.size(), f);  // bounds written at the end, once known
+    header = h;
   } else {
     std::fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment synthetic survey, scanatlas tools/gen_terrain\n"
                     "element vertex %llu\nproperty double x\nproperty double y\nproperty double z\n"
@@ -163,8 +71,11 @@ int main(int argc, char** argv) {
   }
   std::mt19937_64 rng(11);
   std::vector<char> buf;
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (unsigned long long i = 0; i < n; ++i) {
     const Point p = scene.sample(rng);
+    const double w[3] = {kX0 + p.x, kY0 + p.y, kZ0 + p.z};
+    for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], w[k]), hi[k] = std::max(hi[k], w[k]);
     char rec[64];
     size_t len = 0;
     if (las) {
@@ -186,6 +97,10 @@ int main(int argc, char** argv) {
       if (std::fwrite(buf.data(), 1, buf.size(), f) != buf.size()) return 1;
       buf.clear();
     }
+  }
+  if (las) {  // max x, min x, max y, min y, max z, min z
+    for (int k = 0; k < 3; ++k) put<double>(header, 179 + 16 * size_t(k), hi[k]), put<double>(header, 187 + 16 * size_t(k), lo[k]);
+    if (std::fseek(f, 0, SEEK_SET) != 0 || std::fwrite(header.data(), 1, header.size(), f) != header.size()) return 1;
   }
   return std::fclose(f) == 0 ? 0 : 1;
 }

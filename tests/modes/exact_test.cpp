@@ -176,9 +176,11 @@ TEST_P(ExactTrace, PyramidEqualsEveryPatchAndAFineMarch) {
   EXPECT_EQ(capped, 0u);
   EXPECT_EQ(exactLate, 0u);
   // This mix is harder than a view (a quarter of the rays graze at 60-89.9 degrees from random
-  // heights, a quarter start inside the box): measured p99 66 (bunny), 62 (dragon). The GPU
-  // counters over the stress suite's views are held to the 64 (stress_test).
-  EXPECT_LE(pct(0.99), 80u);
+  // heights, a quarter start inside the box), and grazing rays cross more nodes in larger tiles:
+  // measured p99 62 (dragon), 66 (bunny scans in 1642 cells) and 93 (the same scans in 1045
+  // larger cells once their normals' signs were propagated). The GPU counters over the stress
+  // suite's views are held to the 64 (stress_test).
+  EXPECT_LE(pct(0.99), 100u);
   // The march steps over crossings thinner than 1/32 texel (grazing rays over a crest, quadrant
   // pieces at coverage edges); the exact root does not. Measured: see the printed line.
   EXPECT_LE(double(marchDiffers), 0.002 * double(marchCompared));
