@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <sstream>
 
 #include "atlas/pack_file.h"
 #include "cli/args.h"
@@ -14,6 +15,27 @@
 
 namespace sa {
 namespace {
+
+// The NOTE line "texel: T wanted W[ capped by WHAT]" (packs made before it have none).
+struct TexelNote {
+  bool present = false;
+  double wanted = 0;
+  std::string cap;
+};
+TexelNote texelNote(const std::string& note) {
+  TexelNote t;
+  std::istringstream in(note);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("texel: ", 0) != 0) continue;
+    double texel = 0;
+    if (std::sscanf(line.c_str(), "texel: %lf wanted %lf", &texel, &t.wanted) != 2) continue;
+    t.present = true;
+    const size_t c = line.find(" capped by ");
+    if (c != std::string::npos) t.cap = line.substr(c + 11);
+  }
+  return t;
+}
 
 // Reads every point of one input (bounded memory) for counts, bounds and attribute ranges.
 class InputStats : public BatchSink {
@@ -166,6 +188,7 @@ int cmdInfo(int argc, char** argv) {
     bmax[i] = m.origin[i] + m.boundsMax[i];
   }
   const char* phases[6] = {"count", "distribute", "octree", "heightmaps", "write", "total"};
+  const TexelNote tn = texelNote(pack.note());
   if (a.flag("json")) {
     std::printf("{\"file\": \"%s\", \"bytes\": %llu, \"cells\": %u, \"forced_cells\": %u, \"degenerate_cells\": %u, "
                 "\"levels\": {",
@@ -189,12 +212,20 @@ int cmdInfo(int argc, char** argv) {
                 double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)), m.origin[0], m.origin[1],
                 m.origin[2], bmin[0], bmin[1], bmin[2], bmax[0], bmax[1], bmax[2]);
     for (int i = 0; i < 6; ++i) std::printf("%s\"%s\": %.3f", i ? ", " : "", phases[i], m.seconds[i]);
-    std::printf("}, \"modes\": [");
+    std::printf("}, \"texel_wanted\": ");
+    if (tn.present) std::printf("%.9g", tn.wanted);
+    else std::printf("null");
+    std::string capJson = "null";
+    if (!tn.cap.empty()) capJson = '"' + jsonEscape(tn.cap) + '"';
+    std::printf(", \"texel_capped_by\": %s", capJson.c_str());
+    std::printf(", \"modes\": [");
     bool firstMode = true;
     for (const ModeInfo& mi : allModes()) {
       const ModeSection ms = modeSection(pack, mi.mode);
+      std::string section = "null";
+      if (mi.sectionId) section = '"' + std::string(mi.sectionId, 4) + '"';
       std::printf("%s{\"mode\": \"%s\", \"section\": %s, \"present\": %s, \"bytes\": %llu, \"bake_s\": %.3f}",
-                  firstMode ? "" : ", ", mi.name, mi.sectionId ? ("\"" + std::string(mi.sectionId, 4) + "\"").c_str() : "null",
+                  firstMode ? "" : ", ", mi.name, section.c_str(),
                   !ms.needed || ms.present ? "true" : "false", (unsigned long long)ms.bytes, ms.bakeSeconds);
       firstMode = false;
     }
@@ -218,6 +249,11 @@ int cmdInfo(int argc, char** argv) {
   std::printf("texels    %llu in %u page(s) of %ux%u (occupancy %.1f%%), texel %.4g, sample spacing %.4g\n",
               (unsigned long long)tileTexels, m.pageCount, m.pageWidth, m.pageHeight, 100.0 * double(tileTexels) / double(pageTexels),
               m.texelSize, m.sampleSpacing);
+  if (!tn.cap.empty())
+    std::printf("detail    LOST: texels %.2fx coarser than the data's %.4g, capped by %s (repack with a larger --texels)\n",
+                m.texelSize / tn.wanted, tn.wanted, tn.cap.c_str());
+  else if (tn.present)
+    std::printf("detail    full: the texel is the data's (%.4g = half the sample's area spacing, or --texel-size)\n", tn.wanted);
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
   std::printf("timings  ");
   for (int i = 0; i < 6; ++i)

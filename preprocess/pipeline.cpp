@@ -61,6 +61,8 @@ struct PackJob {
   double spacingSum = 0, areaSpacingSum = 0;
   uint64_t spacingWeight = 0;
   double texel = 0;
+  double texelWanted = 0;  // the texel the data asked for (before any cap)
+  std::string texelCap;    // what coarsened it ("" = nothing)
   std::vector<CellRecord> records;
   PackMeta meta{};
 };
@@ -367,6 +369,13 @@ void layoutPhase(PackJob& job) {
     t *= std::sqrt(double(texels) / double(budget)) * 1.01;
   }
   sum.texelSize = job.texel = t;
+  job.texelWanted = wanted;
+  if (t > 1.05 * wanted) {
+    char cap[96];
+    if (budget == opt.texelBudget) std::snprintf(cap, sizeof cap, "--texels %llu", (unsigned long long)opt.texelBudget);
+    else std::snprintf(cap, sizeof cap, "%llu texels per point", (unsigned long long)kMaxTexelsPerPoint);
+    job.texelCap = cap;
+  }
   // A budget that coarsened the texel loses detail: say so, and by how much.
   if (t > 1.05 * wanted && budget == opt.texelBudget) {
     char msg[256];
@@ -462,6 +471,10 @@ std::string makeNote(const PackJob& job) {
       break;
     }
   note += "command: " + job.opt.commandLine + "\n";
+  char texel[160];
+  std::snprintf(texel, sizeof texel, "texel: %.9g wanted %.9g%s%s\n", job.texel, job.texelWanted,
+                job.texelCap.empty() ? "" : " capped by ", job.texelCap.c_str());
+  note += texel;
   return note;
 }
 

@@ -436,3 +436,31 @@ TEST(Cli, OutputsNeverOverwriteInputs) {
 
 }  // namespace
 }  // namespace sa
+
+namespace sa {
+namespace {
+
+// A texel cap that coarsens the data's resolution is said at pack time and by info afterwards
+// (text and JSON), naming the cap; without a cap info says the detail is full.
+TEST(Cli, InfoSaysWhenATexelCapLoweredTheResolution) {
+  test::TempDir d;
+  const std::string bunny = test::sharedData("stanford_bunny/reconstruction/bun_zipper.ply");
+  CmdResult capped = runErr("pack " + bunny + " -o " + d.file("capped.hfa") + " --texels 64K", d.file("err.txt"));
+  ASSERT_EQ(capped.code, 0) << capped.err;
+  EXPECT_NE((capped.out + capped.err).find("detail is lost"), std::string::npos) << capped.out << capped.err;
+  CmdResult info = run("info " + d.file("capped.hfa"));
+  EXPECT_NE(info.out.find("detail    LOST"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("--texels 65536"), std::string::npos) << info.out;
+  auto j = nlohmann::json::parse(run("info " + d.file("capped.hfa") + " --json").out);
+  EXPECT_EQ(j["texel_capped_by"].get<std::string>(), "--texels 65536");
+  EXPECT_GT(j["texel_size"].get<double>(), 1.5 * j["texel_wanted"].get<double>());
+
+  ASSERT_EQ(run("pack " + bunny + " -o " + d.file("full.hfa") + " -q").code, 0);
+  EXPECT_NE(run("info " + d.file("full.hfa")).out.find("detail    full"), std::string::npos);
+  auto f = nlohmann::json::parse(run("info " + d.file("full.hfa") + " --json").out);
+  EXPECT_TRUE(f["texel_capped_by"].is_null());
+  EXPECT_DOUBLE_EQ(f["texel_size"].get<double>(), f["texel_wanted"].get<double>());
+}
+
+}  // namespace
+}  // namespace sa
