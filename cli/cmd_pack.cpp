@@ -65,7 +65,7 @@ const char* kHelp =
     "  --as-points            ignore mesh faces: build height maps from the vertices by pull-push\n"
     "  --strict               a NaN or infinite coordinate is an error (default: skipped, counted)\n"
     "  --force                repack even if OUT already holds a pack of the same input and options\n"
-    "                         (checked by a hash of the input bytes and options, stored in the pack)\n"
+    "                         (checked by a hash of the points as read, the options and the file sizes, stored in the pack)\n"
     "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
     "  --modes LIST           also bake what these surface-detail modes need (comma-separated):\n"
     "                         exact (max-mipmap maxima, ~2.8 bytes a texel), vdm (view-dependent\n"
@@ -218,7 +218,7 @@ int cmdPack(int argc, char** argv) {
     if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
   if (sum.upToDate && !quiet && !a.flag("json"))
-    std::fprintf(stderr, "%s is up to date (same input bytes and options, hash %016llx, checked in %.2fs); --force repacks\n",
+    std::fprintf(stderr, "%s is up to date (same points, files and options, hash %016llx, checked in %.2fs); --force repacks\n",
                  out.c_str(), (unsigned long long)sum.inputHash, sum.seconds[5]);
   if (a.flag("json")) {
     std::printf("{\"output\": \"%s\", \"points\": %llu, \"skipped_points\": %llu, \"triangles\": %llu, \"cells\": %u, "

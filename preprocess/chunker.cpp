@@ -1,5 +1,7 @@
 #include "preprocess/chunker.h"
 
+#include <xxhash.h>
+
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -17,9 +19,21 @@ bool finite3(double x, double y, double z) { return std::isfinite(x) && std::isf
 
 class BoundsSink : public BatchSink {
  public:
-  BoundsSink(BoundsInfo& out, const ProgressFn& p, uint64_t total, const InputSet& in, bool strict)
-      : out_(out), progress_(p), total_(total), in_(in), strict_(strict) {}
+  BoundsSink(BoundsInfo& out, const ProgressFn& p, uint64_t total, const InputSet& in, bool strict, bool hash)
+      : out_(out), progress_(p), total_(total), in_(in), strict_(strict) {
+    if (hash) {
+      hash_ = XXH3_createState();
+      XXH3_64bits_reset(hash_);
+    }
+  }
+  ~BoundsSink() override {
+    if (hash_) XXH3_freeState(hash_);
+  }
+  BoundsSink(const BoundsSink&) = delete;
+  BoundsSink& operator=(const BoundsSink&) = delete;
+  uint64_t digest() const { return hash_ ? XXH3_64bits_digest(hash_) : 0; }
   Status onPoints(const PointBatch& b) override {
+    if (hash_) hashBatch(b);
     for (size_t i = 0; i < b.size(); ++i) {
       if (!finite3(b.x[i], b.y[i], b.z[i])) {
         if (strict_) {
@@ -48,6 +62,18 @@ class BoundsSink : public BatchSink {
   Eigen::Vector3d centroid() const { return out_.count ? ref_ + sum_ / double(out_.count) : ref_; }
 
  private:
+  template <class T>
+  void hashVector(const std::vector<T>& v) {
+    const uint64_t n = v.size();
+    XXH3_64bits_update(hash_, &n, sizeof n);
+    if (n) XXH3_64bits_update(hash_, v.data(), n * sizeof(T));
+  }
+  void hashBatch(const PointBatch& b) {
+    hashVector(b.x), hashVector(b.y), hashVector(b.z), hashVector(b.nx), hashVector(b.ny), hashVector(b.nz);
+    hashVector(b.r), hashVector(b.g), hashVector(b.b), hashVector(b.scan), hashVector(b.intensity);
+    hashVector(b.confidence), hashVector(b.classification);
+  }
+  XXH3_state_t* hash_ = nullptr;
   BoundsInfo& out_;
   const ProgressFn& progress_;
   uint64_t total_, seen_ = 0;
@@ -269,11 +295,12 @@ Status splitChunk(const ChunkInfo& c, const std::string& dir, std::vector<ChunkI
 
 }  // namespace
 
-Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress, bool strict) {
+Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress, bool strict, bool hash) {
   out = BoundsInfo{};
-  BoundsSink sink(out, progress, input.pointCount(), input, strict);
+  BoundsSink sink(out, progress, input.pointCount(), input, strict, hash);
   SA_RETURN_IF_ERROR(input.stream(sink, false));
   out.centroid = sink.centroid();
+  out.contentHash = sink.digest();
   if (out.count == 0) return Status::badInput(input.files()[0].path + ": no finite points in the input");
   return Status::ok();
 }

@@ -54,6 +54,7 @@ struct BoundsInfo {
   uint64_t count = 0;    // finite points
   uint64_t skipped = 0;  // NaN / Inf coordinates
   bool colorVaries = false;  // some two points differ in colour (constant colour is no colour)
+  uint64_t contentHash = 0;  // XXH3 of every batch's attributes as read (computeBounds with hash)
 };
 
 struct ChunkInfo {
@@ -66,8 +67,11 @@ struct ChunkInfo {
 using ProgressFn = std::function<void(const char* phase, uint64_t done, uint64_t total)>;
 
 // Pass 1: bounds, centroid, finite / skipped counts. strict: a NaN/Inf coordinate is an error
-// naming the file and the point, instead of being skipped and counted.
-Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress, bool strict = false);
+// naming the file and the point, instead of being skipped and counted. hash: also hash every
+// point's attributes as they stream by (out.contentHash), so packing reads its input once for
+// both (the up-to-date check).
+Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& progress, bool strict = false,
+                     bool hash = false);
 
 // The node's cube, relative to the pack origin.
 inline void nodeCube(const Quantizer& qz, int level, uint32_t ix, uint32_t iy, uint32_t iz,

@@ -107,7 +107,7 @@ void summarizeExisting(const PackReader& r, PackSummary& sum) {
 // ---- pass 1: bounds ----
 Status boundsPhase(PackJob& job) {
   const auto t0 = Clock::now();
-  SA_RETURN_IF_ERROR(computeBounds(job.input, job.bounds, job.progress, job.opt.strict));
+  SA_RETURN_IF_ERROR(computeBounds(job.input, job.bounds, job.progress, job.opt.strict, true));
   job.sum.pointsRead = job.bounds.count;
   job.sum.pointsSkipped = job.bounds.skipped;
   // Colour channels that never vary (a LAS file whose RGB fields are all 0) are no colour.
@@ -721,7 +721,9 @@ Status tilesPhase(PackJob& job, PackWriter& writer) {
 
 }  // namespace
 
-Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
+// The input hash (PackMeta::inputHash) before the points: options, every file's size and
+// transform, mesh files whole.
+static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   XXH3_state_t* st = XXH3_createState();
   XXH3_64bits_reset(st);
   char opts[768];
@@ -748,6 +750,9 @@ Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
     XXH3_64bits_update(st, &size, sizeof(size));
     for (int a = 0; a < 9; ++a) XXH3_64bits_update(st, &f.rotation(a), sizeof(double));
     XXH3_64bits_update(st, f.translation.data(), 3 * sizeof(double));
+    if (!f.hasFaces) continue;  // points: hashed as they are read for their bounds (computeBounds)
+    // Faces are not streamed by the bounds pass: a mesh file is hashed whole (meshes are small
+    // beside point clouds).
     std::FILE* fp = std::fopen(f.path.c_str(), "rb");
     if (!fp) {
       XXH3_freeState(st);
@@ -759,6 +764,12 @@ Result<uint64_t> hashInput(const InputSet& input, const PackOptions& o) {
   }
   const uint64_t h = XXH3_64bits_digest(st);
   XXH3_freeState(st);
+  return h;
+}
+
+static uint64_t combineHash(uint64_t setup, uint64_t content) {
+  const uint64_t both[2] = {setup, content};
+  const uint64_t h = XXH3_64bits(both, sizeof both);
   return h == 0 ? 1 : h;
 }
 
@@ -767,11 +778,15 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   const auto tStart = Clock::now();
   sum = PackSummary{};
   sum.warnings = input.warnings();
+  auto setup = hashSetup(input, opt);
+  if (!setup) return setup.status();
+  sum.hashSeconds = secondsSince(tStart);
+  PackJob job(input, opt, progress, sum);
+  job.triangles = input.hasTriangles() && !opt.asPoints;
+  job.fileNormals = input.allHaveNormals();
+  SA_RETURN_IF_ERROR(boundsPhase(job));  // also hashes the points as they are read
+  sum.inputHash = combineHash(*setup, job.bounds.contentHash);
   {
-    auto h = hashInput(input, opt);
-    if (!h) return h.status();
-    sum.inputHash = *h;
-    sum.hashSeconds = secondsSince(tStart);
     PackReader existing;
     if (!opt.force && std::filesystem::exists(outPath) && existing.open(outPath).isOk() &&
         existing.meta().inputHash == sum.inputHash) {
@@ -781,12 +796,8 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
       return Status::ok();
     }
   }
-  PackJob job(input, opt, progress, sum);
-  job.triangles = input.hasTriangles() && !opt.asPoints;
-  job.fileNormals = input.allHaveNormals();
   sum.fromTriangles = job.triangles;
   sum.normalsEstimated = !job.fileNormals && !job.triangles;
-  SA_RETURN_IF_ERROR(boundsPhase(job));
   sum.hasColor = job.color && !job.triangles;
   SA_RETURN_IF_ERROR(distributePhase(job, outPath));
   SA_RETURN_IF_ERROR(cellsPhase(job));

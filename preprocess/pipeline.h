@@ -46,7 +46,7 @@ struct PackSummary {
   uint32_t upSource = 0;  // UpSource (atlas/pack_format.h)
   bool upToDate = false;  // the output already held this pack (same input hash): nothing done
   uint64_t inputHash = 0;
-  double hashSeconds = 0;
+  double hashSeconds = 0;  // options, sizes, mesh files (the points are hashed as they are counted)
   std::vector<std::string> warnings;
 };
 
@@ -54,11 +54,8 @@ struct PackSummary {
 inline constexpr uint64_t kMaxTexelsPerPoint = 8;
 
 // Bytes of working memory per point while a chunk is processed (records, positions,
-// normals, kd-tree, tile samples); sets the chunk size from the memory budget.
+// normals, neighbour grid, tile samples); sets the chunk size from the memory budget.
 inline constexpr uint64_t kBytesPerPointInFlight = 240;
-
-// XXH3-64 over the input files' bytes and sizes and every option that shapes the pack.
-Result<uint64_t> hashInput(const InputSet& input, const PackOptions& options);
 
 Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& options,
                  const ProgressFn& progress, PackSummary& summary);

@@ -398,3 +398,35 @@ TEST(Pipeline, SparseStripStaysSmall) {
 
 }  // namespace
 }  // namespace sa
+
+namespace sa {
+namespace {
+
+// The points are hashed as the bounds pass reads them; faces are not streamed there, so a mesh
+// whose vertices stay and whose triangles change must still repack.
+TEST(Pipeline, AMeshWhoseTrianglesChangeIsRepacked) {
+  test::TempDir d;
+  auto write = [&](bool flip) {
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
+                      "element face 4\nproperty list uchar int vertex_indices\nend_header\n"
+                      "0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 0.5 0.3\n";
+    ply += flip ? "3 0 1 2\n3 0 2 3\n3 0 1 4\n3 1 2 4\n" : "3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n";
+    test::writeText(d.file("m.ply"), ply);
+  };
+  PackSummary a, b, c;
+  write(false);
+  auto in = InputSet::open({d.file("m.ply")});
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  ASSERT_TRUE(packInput(*in, d.file("m.hfa"), PackOptions{}, nullptr, a).isOk());
+  ASSERT_TRUE(packInput(*in, d.file("m.hfa"), PackOptions{}, nullptr, b).isOk());
+  EXPECT_TRUE(b.upToDate);
+  write(true);  // same vertices, same size, other triangles
+  auto in2 = InputSet::open({d.file("m.ply")});
+  ASSERT_TRUE(in2.isOk());
+  ASSERT_TRUE(packInput(*in2, d.file("m.hfa"), PackOptions{}, nullptr, c).isOk());
+  EXPECT_FALSE(c.upToDate);
+  EXPECT_NE(c.inputHash, a.inputHash);
+}
+
+}  // namespace
+}  // namespace sa
