@@ -68,7 +68,7 @@ const char* kHelp =
     "                         (checked by a hash of the points as read, the options and the file sizes, stored in the pack)\n"
     "  --scratch DIR          where temporary chunk files go (default: beside the output)\n"
     "  --modes LIST           also bake what these surface-detail modes need (comma-separated):\n"
-    "                         exact (max-mipmap maxima, ~2.8 bytes a texel), vdm (view-dependent\n"
+    "                         exact (min/max mipmaps, ~5.6 bytes a texel), vdm (view-dependent\n"
     "                         distances for the cells within its default 256M budget, and exact's),\n"
     "                         gdm (voxel surfels of the forced cells from the sources, and exact's);\n"
     "                         parallax and points need nothing. Later, with a region or a budget:\n"

@@ -35,7 +35,7 @@ const char* kHelp =
     "  -o, --output FILE      the image to write: .png, or .jpg (JPEG, quality 92)\n"
     "  --depth-out FILE.pfm   also write float32 linear view depth (distance along the camera's\n"
     "                         forward axis, world units; inf where nothing was hit)\n"
-    "  --mode MODE            parallax (default: linear search + bisection), exact (max-mipmap\n"
+    "  --mode MODE            parallax (default: linear search + bisection), exact (min/max-mipmap\n"
     "                         traversal with the exact root; needs 'scanatlas bake PACK --mode exact'),\n"
     "                         vdm (view-dependent displacement lookups; needs 'scanatlas bake PACK\n"
     "                         --mode vdm'); a mode the pack lacks draws its fallback and says so\n"

@@ -287,8 +287,8 @@ Status Renderer::initModes(const PackReader& pack) {
       if (v->codeCount >= (uint64_t(1) << 32))
         return Status::badInput(pack.path() + ": the exact mode's maxima exceed 2^32 codes; render with --mode parallax");
       std::vector<uint32_t> offsets(pack.cells().size());
-      for (size_t i = 0; i < offsets.size(); ++i) offsets[i] = uint32_t(v->offsets[i]);
-      const uint64_t words = (v->codeCount + 1) / 2;
+      for (size_t i = 0; i < offsets.size(); ++i) offsets[i] = uint32_t(v->offsets[i] / 2);  // a node a word
+      const uint64_t words = v->codeCount / 2;
       glCreateBuffers(1, &g.mipBuf);
       glNamedBufferStorage(g.mipBuf, GLsizeiptr(std::max<uint64_t>(words, 1) * 4), nullptr, GL_DYNAMIC_STORAGE_BIT);
       if (v->codeCount) glNamedBufferSubData(g.mipBuf, 0, GLsizeiptr(v->codeCount * 2), v->codes);

@@ -86,10 +86,20 @@ uint16_t encodeUp(double v, double wMin, double wMax) {
   return uint16_t(std::clamp(r, 0.0, 65531.0) + 2);
 }
 
+// A lower bound's code: rounded down, one code of margin; 0 = unbounded below (never skipped by it).
+uint16_t encodeDown(double v, double wMin, double wMax) {
+  if (!(wMax > wMin)) return 0;
+  const double r = std::floor((v - wMin) / (wMax - wMin) * 65534.0);
+  if (r < 1) return 0;
+  return uint16_t(std::min(r, 65534.0));  // decodes to r - 1 codes above wMin: one code below the floor
+}
+
 double decodeNode(uint16_t k, double wMin, double wMax) {
   if (k == kNodeUnbounded) return kInf;
   return decodeHeight(k, wMin, wMax);
 }
+
+double decodeNodeMin(uint16_t k, double wMin, double wMax) { return k == 0 ? -kInf : decodeHeight(k, wMin, wMax); }
 
 // The ray along one piece: g(s) = A + B s + C s^2 = w(s) - h(s), s in [0, L] from the piece's start.
 struct Quadratic {
@@ -223,14 +233,18 @@ bool trace(const PackReader& pack, const CellRecord& c, const uint16_t* codes, c
     }
     const double tOut = std::max(t, std::min({tx[0], tx[1], t1}));
     bool skip = false;
+    double nodeMax = kInf;
     if (codes) {
-      const uint16_t k = codes[lv.offset[l] + uint64_t(n[1]) * lv.w[l] + n[0]];
-      skip = k == kNodeEmpty || std::min(r.z(t), r.z(tOut)) > decodeNode(k, c.box[4], c.box[5]);
+      const uint16_t* node = codes + 2 * (lv.offset[l] + uint64_t(n[1]) * lv.w[l] + n[0]);
+      nodeMax = decodeNode(node[0], c.box[4], c.box[5]);
+      // Above every covered piece (no crossing can start), or below all of them with nothing
+      // above to fall from (no piece is crossed from above: the sheet's underside).
+      skip = node[0] == kNodeEmpty || std::min(r.z(t), r.z(tOut)) > nodeMax ||
+             (!prevAbove && std::max(r.z(t), r.z(tOut)) < decodeNodeMin(node[1], c.box[4], c.box[5]));
     }
     if (!skip && l > 0) {
       // A descending ray is above the node's maximum until it reaches that height: no hit
       // before, so it moves there first (the position is kept inside this node).
-      const double nodeMax = codes ? decodeNode(codes[lv.offset[l] + uint64_t(n[1]) * lv.w[l] + n[0]], c.box[4], c.box[5]) : kInf;
       if (r.dz < 0 && nodeMax < kInf) {
         const double tPlane = (nodeMax - r.z0) / r.dz;
         if (tPlane > t && tPlane < tOut) {
@@ -286,28 +300,38 @@ Levels levelsOf(int tileW, int tileH) {
 void buildCellPyramid(const PackReader& pack, const CellRecord& c, std::vector<uint16_t>& out) {
   const Levels lv = levelsOf(c.tileW, c.tileH);
   const size_t base = out.size();
-  out.resize(base + lv.total, kNodeEmpty);
+  out.resize(base + 2 * lv.total, kNodeEmpty);
   uint16_t* codes = out.data() + base;
   const Surface surf(pack, c);
   for (int py = 0; py < lv.h[0]; ++py)
     for (int px = 0; px < lv.w[0]; ++px) {
       const Patch p = surf.patch(px, py);
-      double top = -kInf;
-      for (int q = 0; q < (p.mixed ? 4 : 1); ++q)
-        if (p.piece[q].covered) top = std::max({top, p.piece[q].h[0], p.piece[q].h[1], p.piece[q].h[2], p.piece[q].h[3]});
-      codes[uint64_t(py) * lv.w[0] + px] = top == -kInf ? kNodeEmpty : encodeUp(top, c.box[4], c.box[5]);
+      double top = -kInf, bottom = kInf;
+      for (int q = 0; q < (p.mixed ? 4 : 1); ++q) {
+        const double* h = p.piece[q].h;
+        if (!p.piece[q].covered) continue;
+        top = std::max({top, h[0], h[1], h[2], h[3]});
+        bottom = std::min({bottom, h[0], h[1], h[2], h[3]});
+      }
+      uint16_t* node = codes + 2 * (uint64_t(py) * lv.w[0] + px);
+      node[0] = top == -kInf ? kNodeEmpty : encodeUp(top, c.box[4], c.box[5]);
+      node[1] = top == -kInf ? kNodeNoFloor : encodeDown(bottom, c.box[4], c.box[5]);
     }
   for (int l = 1; l < lv.count; ++l) {
-    const uint16_t* below = codes + lv.offset[l - 1];
-    uint16_t* here = codes + lv.offset[l];
+    const uint16_t* below = codes + 2 * lv.offset[l - 1];
+    uint16_t* here = codes + 2 * lv.offset[l];
     for (int y = 0; y < lv.h[l]; ++y)
       for (int x = 0; x < lv.w[l]; ++x) {
-        uint16_t m = kNodeEmpty;
+        uint16_t top = kNodeEmpty, bottom = kNodeNoFloor;
         for (int k = 0; k < 4; ++k) {
           const int bx = 2 * x + (k & 1), by = 2 * y + (k >> 1);
-          if (bx < lv.w[l - 1] && by < lv.h[l - 1]) m = std::max(m, below[uint64_t(by) * lv.w[l - 1] + bx]);
+          if (bx >= lv.w[l - 1] || by >= lv.h[l - 1]) continue;
+          const uint16_t* child = below + 2 * (uint64_t(by) * lv.w[l - 1] + bx);
+          top = std::max(top, child[0]);
+          bottom = std::min(bottom, child[1]);
         }
-        here[uint64_t(y) * lv.w[l] + x] = m;
+        here[2 * (uint64_t(y) * lv.w[l] + x)] = top;
+        here[2 * (uint64_t(y) * lv.w[l] + x) + 1] = bottom;
       }
   }
 }
@@ -364,8 +388,8 @@ Result<SectionView> readSection(const PackReader& pack) {
   v.bytes = b.size();
   for (uint64_t i = 0; i < cells; ++i) {
     const CellRecord& c = pack.cells()[i];
-    const uint64_t need = levelsOf(c.tileW, c.tileH).total;
-    if (v.offsets[i] > h.codeCount || need > h.codeCount - v.offsets[i])
+    const uint64_t need = 2 * levelsOf(c.tileW, c.tileH).total;
+    if (v.offsets[i] % 2 || v.offsets[i] > h.codeCount || need > h.codeCount - v.offsets[i])
       return Status::badInput(where + "cell " + std::to_string(i) + "'s pyramid lies outside the section");
   }
   return v;

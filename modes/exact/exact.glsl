@@ -1,13 +1,12 @@
 // The `exact` mode's cast (MODES.md §5; Tevs, Ihrke & Seidel 2008): the maximum-mipmap
-// traversal of modes/exact/exact.cpp in single precision. Nodes the ray passes above are skipped
-// whole; each level-0 patch (quadrant pieces where a corner is uncovered, as sampleHeight) is
-// solved in closed form: w(t) - h(t) is a quadratic in t. Same surface rule as the march: the
-// first crossing from above to below inside the covered region.
+// traversal of modes/exact/exact.cpp in single precision. Nodes the ray passes above (or, with
+// nothing above to fall from, below) are skipped whole; each level-0 patch (quadrant pieces where
+// a corner is uncovered, as sampleHeight) is solved in closed form: w(t) - h(t) is a quadratic
+// in t. Same surface rule as the march: the first crossing from above to below inside the
+// covered region.
 
-layout(std430, binding = 3) readonly buffer ExactMaxima { uint mipWords[]; };   // u16 codes, two a word
-layout(std430, binding = 4) readonly buffer ExactOffsets { uint mipOffset[]; };  // first code of each cell
-
-uint mipCode(uint k) { return (mipWords[k >> 1] >> ((k & 1u) * 16u)) & 0xffffu; }
+layout(std430, binding = 3) readonly buffer ExactMaxima { uint mipWords[]; };   // a node a word: max | min << 16
+layout(std430, binding = 4) readonly buffer ExactOffsets { uint mipOffset[]; };  // first node of each cell
 
 // The corner heights (00, 10, 01, 11) of quadrant q's piece of the patch whose texels are h
 // (kUncovered where none), first texel i0; false when the piece is uncovered.
@@ -138,9 +137,13 @@ bool exactTrace(Cell c, int cell, vec3 o, vec3 d, float tEnter, float tExit, out
     float tyy = dS.y > 0.0 ? (float((n.y + 1) << l) - S0.y) / dS.y : (dS.y < 0.0 ? (float(n.y << l) - S0.y) / dS.y : 3.4e38);
     float tOut = max(t, min(min(txx, tyy), tExit));
     int wl = (N.x + (1 << l) - 1) >> l;
-    uint code = mipCode(base + off + uint(n.y * wl + n.x));
+    uint word = mipWords[base + off + uint(n.y * wl + n.x)];
+    uint code = word & 0xffffu, floorCode = word >> 16;
     float nodeMax = code == 65535u ? 3.4e38 : wMin + (float(code) - 1.0) / 65534.0 * wRange;
-    bool skip = code == 0u || min(o.z + d.z * t, o.z + d.z * tOut) > nodeMax;
+    float nodeMin = floorCode == 0u ? -3.4e38 : wMin + (float(floorCode) - 1.0) / 65534.0 * wRange;
+    float zA = o.z + d.z * t, zB = o.z + d.z * tOut;
+    // Above every covered piece, or below all of them with nothing above to fall from.
+    bool skip = code == 0u || min(zA, zB) > nodeMax || (!prevAbove && max(zA, zB) < nodeMin);
     if (!skip && l > 0) {
       // A descending ray is above the node's maximum until it reaches that height: no hit
       // before, so it moves there first (the position is kept inside this node).

@@ -11,8 +11,12 @@
 //
 // The pyramid: level 0 has one node per patch ((W+1) x (H+1), the gutter ring included); a
 // node holds the largest height any covered piece of its patch reaches, as a 16-bit height code
-// rounded up (0: nothing covered; 65535: unbounded, never skipped); each level above is the 2x2
-// maximum of the one below (odd sizes round up), up to a single node.
+// rounded up (0: nothing covered; 65535: unbounded, never skipped), and the smallest, rounded
+// down (0: unbounded below; 65535 where nothing is covered); each level above is the 2x2
+// maximum and minimum of the one below (odd sizes round up), up to a single node. The maxima
+// skip a ray passing above the surface; the minima skip one passing below it (a ray looking
+// at the sheet's underside, or under it through a hole), which would otherwise solve every
+// patch it crosses.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -25,6 +29,7 @@ namespace sa::exact {
 
 inline constexpr uint16_t kNodeEmpty = 0;        // nothing covered under the node
 inline constexpr uint16_t kNodeUnbounded = 65535;  // may reach the box top: always descend
+inline constexpr uint16_t kNodeNoFloor = 65535;    // a minimum over nothing covered (empty node)
 // The traversal's safety cap for a W x H tile (a ray that reaches it is counted and misses): a
 // ray crossing every patch of the tile at level 0, with an ascent and descent at each, stays
 // below it, so only a traversal that stopped advancing reaches it.
@@ -39,10 +44,11 @@ struct Levels {
 };
 Levels levelsOf(int tileW, int tileH);
 
-// Appends cell c's pyramid (levelsOf(c.tileW, c.tileH).total codes) to out.
+// Appends cell c's pyramid to out: levelsOf(c.tileW, c.tileH).total nodes, two codes each
+// (maximum, minimum), level 0 first, row-major.
 void buildCellPyramid(const PackReader& pack, const CellRecord& c, std::vector<uint16_t>& out);
 
-// Every cell's pyramid, concatenated in cell order; offsets[i] is cell i's first code.
+// Every cell's pyramid, concatenated in cell order; offsets[i] is cell i's first code (even).
 struct Pyramids {
   std::vector<uint64_t> offsets;
   std::vector<uint16_t> codes;
@@ -52,7 +58,7 @@ Pyramids buildPyramids(const PackReader& pack);
 
 // The pack section that stores them (docs/FORMAT.md, `XMAX`).
 inline constexpr char kSectionId[4] = {'X', 'M', 'A', 'X'};
-inline constexpr uint32_t kSectionVersion = 1;
+inline constexpr uint32_t kSectionVersion = 2;  // 1: maxima only
 struct SectionHeader {
   uint32_t version;
   uint32_t cellCount;
@@ -84,7 +90,8 @@ struct TraceStats {
 };
 
 // First hit of o + t d (frame coordinates of cell c, d unit or not) over [t0, t1] under the
-// surface rule above, using the cell's pyramid (codes = its first code). Returns false on a miss.
+// surface rule above, using the cell's pyramid (codes = its first code, as buildCellPyramid
+// lays it out). Returns false on a miss.
 bool traceCell(const PackReader& pack, const CellRecord& c, const uint16_t* codes, const Eigen::Vector3d& o,
                const Eigen::Vector3d& d, double t0, double t1, double& tHit, TraceStats* stats = nullptr);
 

@@ -26,9 +26,10 @@ class ExactGl : public test::GlTest {
  protected:
   void SetUp() override { totals_ = Totals{}; }
   // Over every view of the test: >= 99.9 % of covered pixels within 1e-4 of the diagonal of the
-  // CPU reference, no ray stopped by the cap, and the work per ray within the test's bounds (the
-  // issue's p99 <= 64 holds away from grazing views; rays that graze a large tile visit every
-  // patch they pass near, so grazing views and silhouettes are held to their measured p90).
+  // CPU reference, no ray stopped by the cap, and the work per ray within the p99 <= 64
+  // (p90 <= 32). With the maxima alone, rays under the sheet (its underside, through holes)
+  // solved every patch they crossed: p99 255 at 89 degrees and on the bunny's silhouettes; the
+  // minima skip them (measured p99: grazing 52, faces 38, spike 25, bunny 40).
   void TearDown() override {
     const WorkCounters& w = totals_.work;
     std::printf("[exact-gl] test total: %zu covered pixels, %.4f%% within 1e-4 diag, nodes/ray p50 %u p90 %u p99 %u max %u, "
@@ -36,10 +37,9 @@ class ExactGl : public test::GlTest {
                 w.p50, w.p90, w.p99, w.max, (unsigned long long)w.capped);
     EXPECT_GE(double(totals_.agree), 0.999 * double(totals_.covered));
     EXPECT_EQ(w.capped, 0u);
-    EXPECT_LE(w.p99, p99Bound_);
-    EXPECT_LE(w.p90, p90Bound_);
+    EXPECT_LE(w.p99, 64u);
+    EXPECT_LE(w.p90, 32u);
   }
-  uint32_t p99Bound_ = 64, p90Bound_ = 32;
 
   // Bakes the exact mode into the pack, renders cam with it and compares with the CPU reference.
   test::Agreement run(const std::string& packPath, const Camera& cam, double diag, const char* label) {
@@ -95,8 +95,6 @@ TEST_F(ExactGl, GrazingViewsOverAPlaneWithHoles) {
   std::vector<Eigen::Vector3d> pts, nrm;
   bumpyPlane(pts, nrm, true);
   const std::string pack = test::packPoints(dir_, pts, nrm, "plane");
-  p99Bound_ = 255;  // measured 255 (89 and 89.9 degrees: every patch along the view), p90 24
-  p90Bound_ = 32;
   for (double deg : {60.0, 80.0, 85.0, 89.0, 89.9}) {
     const double a = deg * M_PI / 180;
     Camera cam;
@@ -192,8 +190,6 @@ TEST_F(ExactGl, TallSpikeAndDegenerateCells) {
 
 TEST_F(ExactGl, BunnyScansOrbit) {
   ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
-  p99Bound_ = 255;  // measured p99 255 (silhouettes graze tiles up to ~600 texels), p90 58, p50 8
-  p90Bound_ = 64;
   auto in = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
   ASSERT_TRUE(in.isOk());
   PackSummary sum;
