@@ -39,7 +39,7 @@ const char* kHelp =
     "                         it the mode's fallback is drawn and said. points: the source points\n"
     "                         as splats (reads the pack's source files). Per mode: its bytes on the\n"
     "                         GPU and on disk, bake seconds, and the work per ray (parallax: height\n"
-    "                         samples; the others: pyramid nodes, voxels; vdm: lookups and\n"
+    "                         samples; the others: pyramid nodes, voxels; vdm, gdm: lookups and\n"
     "                         fallbacks) from one counted pass over the cameras after the timed frames\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
@@ -153,8 +153,8 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
        << ", \"bake_s\": " << ms.bakeSeconds;
   if (r.work.valid)
     json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kParallax ? "samples" : "nodes") << "\", \"rays\": " << r.work.rays
-         << ", \"vdm_top_lookups\": " << r.work.topLookups << ", \"vdm_fallbacks\": " << r.work.fallbacks
-         << ", \"vdm_fast_misses\": " << r.work.fastMisses
+         << ", \"lookups\": " << r.work.lookups << ", \"fallbacks\": " << r.work.fallbacks
+         << ", \"fast_misses\": " << r.work.fastMisses
          << ", \"hits\": " << r.work.hits << ", \"mean\": " << r.work.mean() << ", \"p50\": " << r.work.p50 << ", \"p90\": "
          << r.work.p90 << ", \"p99\": " << r.work.p99 << ", \"max\": " << r.work.max << ", \"capped\": " << r.work.capped << "}";
   json << "}";

@@ -51,14 +51,21 @@ Result<ExtraSection> bakeGdm(const PackReader& pack, const BakeRequest& req, std
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ExtraSection s = gdm::makeSection(pack, *grids, seconds);
   uint64_t voxels = 0;
-  size_t built = 0;
+  size_t built = 0, functions = 0, rankSum = 0;
+  double worstP95 = 0;
   for (const gdm::CellGrid& g : *grids) {
     voxels += g.voxels.size();
     built += g.nx > 0;
+    functions += g.fn.rank > 0;
+    rankSum += size_t(g.fn.rank);
+    worstP95 = std::max(worstP95, g.fn.p95);
   }
-  char line[300];
-  std::snprintf(line, sizeof(line), "gdm: section GDMV, %.1f MiB, %zu forced cells (%zu built), %llu voxels, in %.1f s", double(s.bytes.size()) / (1 << 20),
-                grids->size(), built, (unsigned long long)voxels, seconds);
+  char line[400];
+  std::snprintf(line, sizeof(line),
+                "gdm: section GDMV, %.1f MiB, %zu forced cells (%zu built, %zu with a direction function: mean rank %.1f, "
+                "p95 error up to %.2f voxels), %llu voxels, in %.1f s",
+                double(s.bytes.size()) / (1 << 20), grids->size(), built, functions,
+                functions ? double(rankSum) / double(functions) : 0.0, worstP95, (unsigned long long)voxels, seconds);
   summary = line;
   return s;
 }
@@ -67,7 +74,7 @@ const ModeInfo kModes[] = {
     {RenderMode::kParallax, "parallax", "linear search + bisection per height field (Lu, Low & Zheng); needs nothing baked",
      nullptr, nullptr, RenderMode::kParallax, nullptr, "parallax_cast.glsl"},
     {RenderMode::kExact, "exact",
-     "maximum-mipmap traversal with the exact ray-patch root (Tevs et al. 2008); bakes XMAX (about 2/3 of the heights' bytes)",
+     "min/max-mipmap traversal with the exact ray-patch root (Tevs et al. 2008); bakes XMAX (about 5.6 bytes a texel)",
      exact::kSectionId, bakeExact, RenderMode::kExact, "parallax", "exact.glsl"},
     {RenderMode::kVdm, "vdm",
      "view-dependent displacement (Wang et al. 2003): a per-texel distance per view direction, PCA-compressed, predict -> "
@@ -75,7 +82,8 @@ const ModeInfo kModes[] = {
      vdm::kSectionId, bakeVdm, RenderMode::kExact, "exact", "vdm.glsl"},
     {RenderMode::kGdm, "gdm",
      "forced cells (not height fields: overhangs, thin parts) drawn from voxel surfels of their source points or triangles "
-     "by a 3-D DDA from any face or from inside; bakes GDMV (reads the pack's sources) and XMAX; other cells draw exact",
+     "by a 3-D DDA from any face or from inside, guided by the SVD-compressed distance function (Wang et al. 2004); "
+     "bakes GDMV (reads the pack's sources) and XMAX; other cells draw exact",
      gdm::kSectionId, bakeGdm, RenderMode::kExact, "exact", "gdm.glsl"},
     {RenderMode::kPoints, "points", "the source points as splats (the baseline; reads the pack's sources)", nullptr, nullptr,
      RenderMode::kPoints, nullptr, nullptr},

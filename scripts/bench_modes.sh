@@ -45,7 +45,7 @@ for m in ("bunny", "dragon"):
     print(f"\n{m}: {texels} texels, pack {info['bytes'] / 2**20:.1f} MiB, renderer {bench['renderer']}, "
           f"{bench['cameras']} views at {bench['width']}x{bench['height']}\n")
     print("| mode | iters | section MiB | B/texel | GPU MiB (mode) | bake s | frame ms | IoU | depth med % | depth p95 % "
-          "| normal deg | work/ray mean (p99) | vdm fallbacks |")
+          "| normal deg | work/ray mean (p99) | lookups falling back |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for c in bench["configs"]:
         name = c["mode"]
@@ -54,7 +54,7 @@ for m in ("bunny", "dragon"):
         sec = modes.get(name, {})
         mib = c["mode_disk_bytes"] / 2**20
         w = c.get("work", {})
-        fb = f"{100 * w['vdm_fallbacks'] / w['vdm_top_lookups']:.1f} %" if w.get("vdm_top_lookups") else "-"
+        fb = f"{100 * w['fallbacks'] / w['lookups']:.1f} %" if w.get("lookups") else "-"
         err = (f"{e['iou']:.4f} | {100 * e['depth_median']:.4f} | {100 * e['depth_p95']:.4f} | {e['normal_median_deg']:.2f}"
                if e else "- | - | - | -")
         print(f"| {name} | {it} | {mib:.1f} | {c['mode_disk_bytes'] / texels:.2f} | {c['mode_gpu_bytes'] / 2**20:.1f} | "

@@ -363,7 +363,7 @@ void WorkCounters::add(const WorkCounters& o) {
   capped += o.capped;
   fallbacks += o.fallbacks;
   fastMisses += o.fastMisses;
-  topLookups += o.topLookups;
+  lookups += o.lookups;
   max = std::max(max, o.max);
   histogram.resize(256, 0);
   for (size_t k = 0; k < o.histogram.size() && k < 256; ++k) histogram[k] += o.histogram[k];
@@ -381,7 +381,7 @@ void Renderer::readCounters(WorkCounters& w) {
   w.hits = c[4];
   w.fallbacks = c[5];
   w.fastMisses = c[6];
-  w.topLookups = c[7];
+  w.lookups = c[7];
   w.histogram.assign(c + 8, c + 8 + 256);
   w.percentiles();
 }

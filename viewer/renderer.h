@@ -56,7 +56,9 @@ struct RenderSettings {
 struct WorkCounters {
   bool valid = false;
   uint64_t rays = 0, work = 0, hits = 0, capped = 0;
-  uint64_t topLookups = 0, fallbacks = 0, fastMisses = 0;  // vdm: top-face lookups, those that fell back, fast misses
+  // The mode's precomputed-function lookups (vdm: at the top face; gdm: where a ray enters a
+  // forced cell), those that fell back to the traversal, and misses settled without it.
+  uint64_t lookups = 0, fallbacks = 0, fastMisses = 0;
   uint32_t max = 0, p50 = 0, p90 = 0, p99 = 0;  // percentiles of work per ray (255 = 255 or more)
   std::vector<uint64_t> histogram;               // rays per work 0..255 (the last: 255 or more)
   double mean() const { return rays ? double(work) / double(rays) : 0; }

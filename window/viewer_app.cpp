@@ -267,9 +267,9 @@ void drawSurfacePanel(AppState& s) {
       const WorkCounters& w = s.stats.work;
       ImGui::Text("%s/ray mean %.1f p50 %u p99 %u max %u", s.stats.drawnMode == RenderMode::kParallax ? "samples" : "nodes",
                   w.mean(), w.p50, w.p99, w.max);
-      if (w.topLookups)
-        ImGui::Text("vdm lookups %llu: %.1f%% fell back, %.1f%% fast misses", (unsigned long long)w.topLookups,
-                    100.0 * double(w.fallbacks) / double(w.topLookups), 100.0 * double(w.fastMisses) / double(w.topLookups));
+      if (w.lookups)
+        ImGui::Text("%s lookups %llu: %.1f%% fell back, %.1f%% fast misses", modeName(s.rs.mode), (unsigned long long)w.lookups,
+                    100.0 * double(w.fallbacks) / double(w.lookups), 100.0 * double(w.fastMisses) / double(w.lookups));
     }
     ImGui::SliderInt("iterations", &s.rs.iterations, 1, 64);
     ImGui::Checkbox("frustum cull", &s.rs.cull.frustum);

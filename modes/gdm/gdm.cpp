@@ -119,30 +119,36 @@ CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double 
   return g;
 }
 
-bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
-           double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched) {
-  if (touched) *touched = false;
-  if (g.nx == 0 || !(t0 <= t1)) return false;
+namespace {
+
+// The DDA from t0 (first voxel: where o + t0 d lies) to t1; n: the voxels visited. A surfel hit
+// counts from tAccept on (the first voxel: from where the ray enters it, so a walk that starts
+// inside a voxel, the guided one, finds what a walk from the box would).
+bool walk(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
+          double tAccept, double& tHit, Eigen::Vector3d* normal, uint32_t& n, bool& touched) {
   const Eigen::Vector3d vs(g.vx, g.vy, g.vz), lo = gridMin(c);
   const int N[3] = {g.nx, g.ny, g.nz};
   const Eigen::Vector3d p = o + d * t0 - lo;
   int idx[3], step[3];
   double tMax[3], tDelta[3];
+  double t = t0;
+  double entry = -INFINITY;  // where the ray entered this voxel
   for (int k = 0; k < 3; ++k) {
     idx[k] = std::clamp(int(std::floor(p[k] / vs[k])), 0, N[k] - 1);
     step[k] = d[k] > 0 ? 1 : (d[k] < 0 ? -1 : 0);
     tDelta[k] = d[k] != 0 ? vs[k] / std::abs(d[k]) : INFINITY;
     tMax[k] = d[k] != 0 ? t0 + ((idx[k] + (step[k] > 0 ? 1 : 0)) * vs[k] - p[k]) / d[k] : INFINITY;
+    if (d[k] != 0) entry = std::max(entry, tMax[k] - tDelta[k]);
   }
+  t = std::max(std::min(entry, t), tAccept);
   const double margin = 0.25 * vs.minCoeff();
-  double t = t0;
-  uint32_t n = 0;
-  for (; n < uint32_t(g.nx + g.ny + g.nz + 4); ++n) {
+  const uint32_t cap = uint32_t(g.nx + g.ny + g.nz + 4);
+  for (n = 0; n < cap; ++n) {
     const int a = tMax[0] <= tMax[1] ? (tMax[0] <= tMax[2] ? 0 : 2) : (tMax[1] <= tMax[2] ? 1 : 2);
     const double tNext = std::min(std::max(tMax[a], t), t1);
     const uint32_t v = g.at(idx[0], idx[1], idx[2]);
     if (v) {
-      if (touched) *touched = true;
+      touched = true;
       Eigen::Vector3d nn;
       double off;
       decodeVoxel(v, vs, nn, off);
@@ -150,22 +156,249 @@ bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, con
       const double den = d.dot(nn);
       if (std::abs(den) > 1e-12) {
         const double tp = (off - (o - centre).dot(nn)) / den;
-        if (tp >= t - margin && tp <= tNext + margin && tp >= t0 && tp <= t1) {
+        if (tp >= t - margin && tp <= tNext + margin && tp >= tAccept && tp <= t1) {
           tHit = tp;
           if (normal) *normal = den > 0 ? -nn : nn;
-          if (steps) *steps = n + 1;
+          ++n;
           return true;
         }
       }
     }
-    if (tNext >= t1) break;
+    if (tNext >= t1) {
+      ++n;
+      return false;
+    }
     idx[a] += step[a];
-    if (idx[a] < 0 || idx[a] >= N[a]) break;
+    if (idx[a] < 0 || idx[a] >= N[a]) {
+      ++n;
+      return false;
+    }
     t = tNext;
     tMax[a] += tDelta[a];
   }
-  if (steps) *steps = n + 1;
   return false;
+}
+
+int thetaBin(const Eigen::Vector3d& d) {
+  const double z = std::clamp(d.z() / d.norm(), -1.0, 1.0);
+  return std::clamp(int(std::acos(z) / M_PI * kThetaBins), 0, kThetaBins - 1);
+}
+
+int phiBin(const Eigen::Vector3d& d) {
+  if (d.x() == 0 && d.y() == 0) return 0;
+  return int(std::floor(std::atan2(d.y(), d.x()) / (2 * M_PI) * kPhiBins + 0.5)) & (kPhiBins - 1);
+}
+
+Eigen::Vector3d binDirection(int i, int j) {
+  const double th = (i + 0.5) * M_PI / kThetaBins, ph = 2 * M_PI * j / kPhiBins;
+  return {std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)};
+}
+
+// From voxel centre (x, y, z) along unit direction e: distance to the first occupied voxel's
+// entry (0: this one), or to the grid's end where none is met, in frame units.
+double firstOccupied(const CellGrid& g, int x, int y, int z, const Eigen::Vector3d& e) {
+  const double vs[3] = {g.vx, g.vy, g.vz};
+  const int N[3] = {g.nx, g.ny, g.nz};
+  int idx[3] = {x, y, z}, step[3];
+  double tMax[3], tDelta[3];
+  for (int k = 0; k < 3; ++k) {
+    step[k] = e[k] > 0 ? 1 : (e[k] < 0 ? -1 : 0);
+    tDelta[k] = e[k] != 0 ? vs[k] / std::abs(e[k]) : INFINITY;
+    tMax[k] = e[k] != 0 ? 0.5 * tDelta[k] : INFINITY;
+  }
+  double t = 0;
+  for (;;) {
+    if (g.at(idx[0], idx[1], idx[2])) return t;
+    const int a = tMax[0] <= tMax[1] ? (tMax[0] <= tMax[2] ? 0 : 2) : (tMax[1] <= tMax[2] ? 1 : 2);
+    t = tMax[a];
+    idx[a] += step[a];
+    if (idx[a] < 0 || idx[a] >= N[a]) return t;
+    tMax[a] += tDelta[a];
+  }
+}
+
+float toHalf(float f) { return float(Eigen::half(f)); }
+
+}  // namespace
+
+bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
+           double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched) {
+  if (touched) *touched = false;
+  if (g.nx == 0 || !(t0 <= t1)) return false;
+  uint32_t n = 0;
+  bool tch = false;
+  const bool hit = walk(c, g, o, d, t0, t1, t0, tHit, normal, n, tch);
+  if (steps) *steps = n;
+  if (touched) *touched = tch;
+  return hit;
+}
+
+std::vector<float> sampleFunction(const CellGrid& g) {
+  const size_t rows = size_t(g.nx) * g.ny * kPhiBins, cols = size_t(g.nz) * kThetaBins;
+  std::vector<float> m(rows * cols);
+  const double unit = std::min({g.vx, g.vy, g.vz});
+  Eigen::Vector3d dirs[kThetaBins][kPhiBins];
+  for (int i = 0; i < kThetaBins; ++i)
+    for (int j = 0; j < kPhiBins; ++j) dirs[i][j] = binDirection(i, j);
+  for (int y = 0; y < g.ny; ++y)
+    for (int x = 0; x < g.nx; ++x)
+      for (int j = 0; j < kPhiBins; ++j) {
+        float* row = m.data() + ((size_t(y) * g.nx + x) * kPhiBins + j) * cols;
+        for (int z = 0; z < g.nz; ++z)
+          for (int i = 0; i < kThetaBins; ++i) row[z * kThetaBins + i] = float(firstOccupied(g, x, y, z, dirs[i][j]) / unit);
+      }
+  return m;
+}
+
+namespace {
+
+// Makes the sampled function a safer bound for the rays the shader asks about, which start
+// anywhere in the entry voxel and point anywhere in the nearest bin: per voxel and bin, the
+// smallest value over the neighbouring bins (theta +-1, phi +-1), then over the rays of the six
+// face neighbours, each moved onto this voxel's ray (plus the offset between the centres along
+// the bin's direction). Measured on a 40x40x20 cell: without the neighbours' rays 0.7 % of guided
+// rays answered differently from the whole walk, with the six 0.03 % (the 26: 0.005 %, but
+// walking 12 % more).
+void lowerBound(const CellGrid& g, std::vector<float>& m) {
+  const size_t cols = size_t(g.nz) * kThetaBins;
+  const size_t rowsPerVoxel = kPhiBins;
+  std::vector<float> a(m.size());
+  // Directions: rows hold phi (within a voxel's 32 rows), columns theta.
+  for (size_t vox = 0; vox < size_t(g.nx) * g.ny; ++vox)
+    for (int j = 0; j < kPhiBins; ++j)
+      for (int z = 0; z < g.nz; ++z)
+        for (int i = 0; i < kThetaBins; ++i) {
+          float v = INFINITY;
+          for (int dj = -1; dj <= 1; ++dj) {
+            const float* row = m.data() + (vox * rowsPerVoxel + ((j + dj) & (kPhiBins - 1))) * cols + size_t(z) * kThetaBins;
+            for (int di = std::max(i - 1, 0); di <= std::min(i + 1, kThetaBins - 1); ++di) v = std::min(v, row[di]);
+          }
+          a[(vox * rowsPerVoxel + j) * cols + size_t(z) * kThetaBins + i] = v;
+        }
+  // Space: the six face neighbours.
+  const double unit = std::min({g.vx, g.vy, g.vz});
+  const int off[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+  float along[6][kThetaBins][kPhiBins];
+  for (int n = 0; n < 6; ++n) {
+    const Eigen::Vector3d delta(off[n][0] * g.vx, off[n][1] * g.vy, off[n][2] * g.vz);
+    for (int i = 0; i < kThetaBins; ++i)
+      for (int j = 0; j < kPhiBins; ++j) along[n][i][j] = float(delta.dot(binDirection(i, j)) / unit);
+  }
+  for (int y = 0; y < g.ny; ++y)
+    for (int x = 0; x < g.nx; ++x)
+      for (int j = 0; j < kPhiBins; ++j)
+        for (int z = 0; z < g.nz; ++z)
+          for (int i = 0; i < kThetaBins; ++i) {
+            float v = a[((size_t(y) * g.nx + x) * kPhiBins + j) * cols + size_t(z) * kThetaBins + i];
+            for (int n = 0; n < 6; ++n) {
+              const int xx = x + off[n][0], yy = y + off[n][1], zz = z + off[n][2];
+              if (xx < 0 || yy < 0 || zz < 0 || xx >= g.nx || yy >= g.ny || zz >= g.nz) continue;
+              v = std::min(v, std::max(0.0f, a[((size_t(yy) * g.nx + xx) * kPhiBins + j) * cols + size_t(zz) * kThetaBins + i] +
+                                                 along[n][i][j]));
+            }
+            m[((size_t(y) * g.nx + x) * kPhiBins + j) * cols + size_t(z) * kThetaBins + i] = v;
+          }
+}
+
+}  // namespace
+
+void bakeFunction(CellGrid& g, double maxError, uint64_t maxEntries) {
+  g.fn = Function{};
+  const uint64_t rows = uint64_t(g.nx) * g.ny * kPhiBins, cols = uint64_t(g.nz) * kThetaBins;
+  if (g.nx == 0 || rows * cols > maxEntries || cols > 2048) return;
+  std::vector<float> raw = sampleFunction(g);
+  lowerBound(g, raw);
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const Eigen::Map<const RowMajor> M(raw.data(), Eigen::Index(rows), Eigen::Index(cols));
+  // The right singular vectors: eigenvectors of M^T M (cols x cols), largest first; the left
+  // factor of rank k is then the first k columns of M V.
+  const Eigen::MatrixXf G = M.transpose() * M;  // float products (the largest: 2^25 values, 2048 columns)
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(G.cast<double>());
+  const int maxRank = int(std::min<uint64_t>({uint64_t(kMaxRank), rows, cols}));
+  const Eigen::MatrixXf V = eig.eigenvectors().rightCols(maxRank).rowwise().reverse().cast<float>().unaryExpr(&toHalf);
+  const Eigen::MatrixXf U = (M * V).unaryExpr(&toHalf);
+  // The rank: the smallest whose error (as stored, in halves) is within maxError at the 95th
+  // percentile, measured on up to 2^16 entries spread evenly over the matrix.
+  const uint64_t n = rows * cols, stride = std::max<uint64_t>(1, n >> 16);
+  std::vector<float> err;
+  for (int k = 1; k <= maxRank; ++k) {
+    err.clear();
+    for (uint64_t e = 0; e < n; e += stride) {
+      const Eigen::Index r = Eigen::Index(e / cols), q = Eigen::Index(e % cols);
+      err.push_back(std::abs(U.row(r).head(k).dot(V.row(q).head(k)) - M(r, q)));
+    }
+    const size_t i95 = size_t(0.95 * double(err.size() - 1)), i99 = size_t(0.99 * double(err.size() - 1));
+    std::nth_element(err.begin(), err.begin() + i99, err.end());
+    const double p99 = err[i99];
+    std::nth_element(err.begin(), err.begin() + i95, err.begin() + i99);
+    const double p95 = err[i95];
+    if (p95 <= maxError || k == maxRank) {
+      g.fn.rank = k;
+      g.fn.p95 = p95;
+      g.fn.p99 = p99;
+      g.fn.u.resize(size_t(rows) * k);
+      g.fn.v.resize(size_t(cols) * k);
+      for (uint64_t r = 0; r < rows; ++r)
+        for (int q = 0; q < k; ++q) g.fn.u[r * k + q] = U(Eigen::Index(r), q);
+      for (uint64_t r = 0; r < cols; ++r)
+        for (int q = 0; q < k; ++q) g.fn.v[r * k + q] = V(Eigen::Index(r), q);
+      return;
+    }
+  }
+}
+
+double lookup(const CellGrid& g, int x, int y, int z, const Eigen::Vector3d& d) {
+  const int k = g.fn.rank;
+  const size_t row = (size_t(y) * g.nx + x) * kPhiBins + phiBin(d), col = size_t(z) * kThetaBins + thetaBin(d);
+  float s = 0;
+  for (int q = 0; q < k; ++q) s += g.fn.u[row * k + q] * g.fn.v[col * k + q];
+  return s;
+}
+
+int voxelsCrossed(const CellGrid& g, const Eigen::Vector3d& d, double t0, double t1) {
+  const double n = (t1 - t0) * (std::abs(d.x()) / g.vx + std::abs(d.y()) / g.vy + std::abs(d.z()) / g.vz);
+  return n < 1e9 ? int(n) + 1 : 1000000000;
+}
+
+bool traceGuided(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0,
+                 double t1, double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched, Guided* how) {
+  if (how) *how = Guided::kNone;
+  if (g.fn.rank == 0 || g.nx == 0 || !(t0 <= t1) || voxelsCrossed(g, d, t0, t1) <= kDirectVoxels)
+    return trace(c, g, o, d, t0, t1, tHit, normal, steps, touched);
+  const Eigen::Vector3d vs(g.vx, g.vy, g.vz), lo = gridMin(c);
+  const double unit = vs.minCoeff(), len = d.norm();
+  auto voxelAt = [&](double t, int b[3]) {
+    const Eigen::Vector3d q = o + d * t - lo;
+    for (int k = 0; k < 3; ++k) b[k] = std::clamp(int(std::floor(q[k] / vs[k])), 0, (k == 0 ? g.nx : k == 1 ? g.ny : g.nz) - 1);
+  };
+  // Jumps: at most kMaxJumps lookups, each from the voxel the ray has reached, less a margin for
+  // the compression error; a jump is taken only when the voxel half a voxel before where it lands
+  // is empty (else the function overestimated there: walk from where the ray was).
+  double t = t0;
+  int jumps = 0;
+  bool failed = false;
+  while (jumps < kMaxJumps && t < t1) {
+    int idx[3];
+    voxelAt(t, idx);
+    ++jumps;
+    const double skip = (lookup(g, idx[0], idx[1], idx[2], d) - 0.5) * unit / len;
+    if (skip < unit / len) break;  // less than a voxel: walk
+    const double tn = std::min(t + skip, t1);
+    int b[3];
+    voxelAt(tn - 0.5 * unit / len, b);
+    if (g.at(b[0], b[1], b[2])) {
+      failed = true;
+      break;
+    }
+    t = tn;
+  }
+  uint32_t n = 0;
+  bool tch = false;
+  const bool hit = t < t1 && walk(c, g, o, d, t, t1, t0, tHit, normal, n, tch);
+  if (how) *how = failed ? Guided::kFallback : hit ? Guided::kHit : Guided::kMiss;
+  if (steps) *steps = n + uint32_t(jumps);  // a lookup counts as one
+  if (touched) *touched = tch;
+  return hit;
 }
 
 namespace {
@@ -270,6 +503,7 @@ Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, const std
       }
       grids[k] = buildGrid(c, forced[k], s, spacing);
     }
+    bakeFunction(grids[k]);
     const uint64_t d = ++done;
     if (progress) {
       std::lock_guard<std::mutex> lock(m);
@@ -278,6 +512,30 @@ Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, const std
   });
   return grids;
 }
+
+namespace {
+
+// Halves two to a word, low half first; an odd count leaves the last high half zero.
+void appendHalves(std::vector<uint32_t>& words, const std::vector<float>& values) {
+  for (size_t i = 0; i < values.size(); i += 2) {
+    const uint16_t lo = Eigen::half(values[i]).x, hi = i + 1 < values.size() ? Eigen::half(values[i + 1]).x : 0;
+    words.push_back(uint32_t(lo) | uint32_t(hi) << 16);
+  }
+}
+
+std::vector<float> readHalves(const uint32_t* words, size_t count) {
+  std::vector<float> out(count);
+  for (size_t i = 0; i < count; ++i) {
+    Eigen::half h;
+    h.x = uint16_t(words[i / 2] >> (16 * (i % 2)));
+    out[i] = float(h);
+  }
+  return out;
+}
+
+uint64_t halfWords(uint64_t halves) { return (halves + 1) / 2; }
+
+}  // namespace
 
 ExtraSection makeSection(const PackReader& pack, const std::vector<CellGrid>& grids, double bakeSeconds) {
   std::vector<uint32_t> entries(pack.cells().size(), kNoEntry), words;
@@ -288,9 +546,15 @@ ExtraSection makeSection(const PackReader& pack, const std::vector<CellGrid>& gr
     const float v[3] = {float(g.vx), float(g.vy), float(g.vz)};
     uint32_t vb[3];
     std::memcpy(vb, v, 12);
-    const uint32_t head[kBlockHeaderWords] = {uint32_t(g.nx), uint32_t(g.ny), uint32_t(g.nz), vb[0], vb[1], vb[2], 0, 0};
+    const uint32_t fnStart = uint32_t(kBlockHeaderWords + g.voxels.size());
+    const uint32_t head[kBlockHeaderWords] = {uint32_t(g.nx), uint32_t(g.ny), uint32_t(g.nz), vb[0], vb[1], vb[2],
+                                              uint32_t(g.fn.rank), g.fn.rank ? fnStart : 0u};
     words.insert(words.end(), head, head + kBlockHeaderWords);
     words.insert(words.end(), g.voxels.begin(), g.voxels.end());
+    if (g.fn.rank) {
+      appendHalves(words, g.fn.u);
+      appendHalves(words, g.fn.v);
+    }
     ++count;
   }
   SectionHeader h{};
@@ -316,7 +580,9 @@ Result<SectionView> readSection(const PackReader& pack) {
   if (b.size() < sizeof(SectionHeader)) return Status::badInput(where + "too short");
   std::memcpy(&v.header, b.data(), sizeof(SectionHeader));
   const SectionHeader& h = v.header;
-  if (h.version != kSectionVersion) return Status::badInput(where + "another version; bake it again: scanatlas bake PACK --mode gdm");
+  if (h.version != kSectionVersion)
+    return Status::badInput(where + "version " + std::to_string(h.version) + ", this program reads version " +
+                            std::to_string(kSectionVersion) + "; bake it again: scanatlas bake PACK --mode gdm");
   if (h.cellCount != pack.cells().size()) return Status::badInput(where + "made for another cell table (bake it again)");
   if (h.wordCount > b.size() / 4 || sizeof(SectionHeader) + 4 * (uint64_t(h.cellCount) + h.wordCount) != b.size())
     return Status::badInput(where + "its size does not match its header");
@@ -328,9 +594,14 @@ Result<SectionView> readSection(const PackReader& pack) {
     if (uint64_t(e) + kBlockHeaderWords > h.wordCount) return Status::badInput(where + "cell " + std::to_string(i) + " lies outside");
     const uint32_t* blk = v.words + e;
     const CellRecord& c = pack.cells()[i];
-    if (blk[0] != c.tileW || blk[1] != c.tileH || blk[2] == 0 || blk[2] > 1024 ||
-        uint64_t(e) + kBlockHeaderWords + uint64_t(blk[0]) * blk[1] * blk[2] > h.wordCount)
-      return Status::badInput(where + "cell " + std::to_string(i) + "'s block is inconsistent (bake it again)");
+    const uint64_t voxels = uint64_t(blk[0]) * blk[1] * blk[2], rank = blk[6];
+    bool bad = blk[0] != c.tileW || blk[1] != c.tileH || blk[2] == 0 || blk[2] > 1024 ||
+               uint64_t(e) + kBlockHeaderWords + voxels > h.wordCount || rank > uint64_t(kMaxRank);
+    if (!bad && rank) {
+      const uint64_t fnWords = halfWords(voxels / blk[2] * kPhiBins * rank) + halfWords(uint64_t(blk[2]) * kThetaBins * rank);
+      bad = blk[7] != kBlockHeaderWords + voxels || uint64_t(e) + blk[7] + fnWords > h.wordCount;
+    }
+    if (bad) return Status::badInput(where + "cell " + std::to_string(i) + "'s block is inconsistent (bake it again)");
   }
   v.present = true;
   v.bytes = b.size();
@@ -351,6 +622,12 @@ CellGrid gridFromSection(const PackReader& pack, const SectionView& v, uint32_t 
   g.vy = f[1];
   g.vz = f[2];
   g.voxels.assign(blk + kBlockHeaderWords, blk + kBlockHeaderWords + size_t(g.nx) * g.ny * g.nz);
+  g.fn.rank = int(blk[6]);
+  if (g.fn.rank) {
+    const uint64_t uHalves = uint64_t(g.nx) * g.ny * kPhiBins * g.fn.rank;
+    g.fn.u = readHalves(blk + blk[7], uHalves);
+    g.fn.v = readHalves(blk + blk[7] + halfWords(uHalves), uint64_t(g.nz) * kThetaBins * g.fn.rank);
+  }
   return g;
 }
 

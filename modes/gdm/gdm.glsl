@@ -1,7 +1,8 @@
-// The `gdm` mode's cast (modes/gdm/gdm.cpp `trace` is the same rule on the CPU): a cell with a
-// voxel grid (a forced cell) is traversed voxel by voxel (Amanatides & Woo) from where the ray
-// enters the box - any face, or the camera inside - and the first voxel whose surfel plane the
-// ray meets within the voxel is the hit; its normal shades. A ray that passes no occupied voxel
+// The `gdm` mode's cast (modes/gdm/gdm.cpp `traceGuided` is the same rule on the CPU): a cell
+// with a voxel grid (a forced cell) looks up its generalized displacement function where the ray
+// enters the box - any face, or the camera inside - and walks voxels (Amanatides & Woo) from the
+// predicted point, or from the entry where the prediction fails a check; the first voxel whose
+// surfel plane the ray meets within the voxel is the hit; its normal shades. A ray that passes no occupied voxel
 // at all (samples too sparse for surfels: scan edges, cracks the pack's pull-push closed) takes
 // the cell's height field instead. Other cells: the exact traversal.
 #define EXACT_NO_CAST 1
@@ -20,11 +21,31 @@ vec3 gdmNormal(uint v, vec3 vs, out float offset) {
   return normalize(vec3(xy, z));
 }
 
-// touched: the ray passed an occupied voxel (whether or not it met the surfel).
-bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tHit, out vec3 nHit, out uint steps,
-              out bool touched) {
+float gdmHalf(uint base, uint h) {
+  vec2 v = unpackHalf2x16(gdmWord[base + (h >> 1u)]);
+  return (h & 1u) == 0u ? v.x : v.y;
+}
+
+// The direction function at voxel idx for direction d (gdm.cpp lookup): the nearest bin's value,
+// sum over k of u[(y nx + x) 32 + phi bin][k] v[z 16 + theta bin][k], in units of the smallest voxel side.
+float gdmLookup(uint blk, ivec3 N, ivec3 idx, vec3 d) {
+  uint rank = gdmWord[blk + 6u];
+  uint uBase = blk + gdmWord[blk + 7u];
+  uint vBase = uBase + (uint(N.x * N.y * 32) * rank + 1u) / 2u;
+  int i = clamp(int(acos(clamp(d.z / length(d), -1.0, 1.0)) / 3.14159265 * 16.0), 0, 15);
+  int j = d.x == 0.0 && d.y == 0.0 ? 0 : int(floor(atan(d.y, d.x) / 6.28318531 * 32.0 + 0.5)) & 31;
+  uint r = uint((idx.y * N.x + idx.x) * 32 + j) * rank, q = uint(idx.z * 16 + i) * rank;
+  float s = 0.0;
+  for (uint k = 0u; k < rank; ++k) s += gdmHalf(uBase, r + k) * gdmHalf(vBase, q + k);
+  return s;
+}
+
+// The DDA from t0 to t1 (gdm.cpp walk): a surfel hit counts from tAccept on (in the first voxel
+// from where the ray entered it). touched: the ray passed an occupied voxel (whether or not it
+// met the surfel).
+bool gdmWalk(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, float tAccept, out float tHit, out vec3 nHit,
+             out uint steps, inout bool touched) {
   tHit = 0.0;
-  touched = false;
   nHit = vec3(0.0, 0.0, 1.0);
   ivec3 N = ivec3(gdmWord[blk], gdmWord[blk + 1u], gdmWord[blk + 2u]);
   vec3 vs = vec3(uintBitsToFloat(gdmWord[blk + 3u]), uintBitsToFloat(gdmWord[blk + 4u]), uintBitsToFloat(gdmWord[blk + 5u]));
@@ -35,11 +56,15 @@ bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tH
   ivec3 stp = ivec3(sign(d));
   vec3 tDelta = vec3(d.x != 0.0 ? vs.x / abs(d.x) : 3.4e38, d.y != 0.0 ? vs.y / abs(d.y) : 3.4e38, d.z != 0.0 ? vs.z / abs(d.z) : 3.4e38);
   vec3 tMax;
-  for (int k = 0; k < 3; ++k)
+  float entry = -3.4e38;
+  for (int k = 0; k < 3; ++k) {
     tMax[k] = d[k] != 0.0 ? t0 + ((float(idx[k]) + (stp[k] > 0 ? 1.0 : 0.0)) * vs[k] - p[k]) / d[k] : 3.4e38;
+    if (d[k] != 0.0) entry = max(entry, tMax[k] - tDelta[k]);
+  }
   float margin = 0.25 * min(min(vs.x, vs.y), vs.z);
-  float t = t0;
+  float t = max(min(entry, t0), tAccept);
   int cap = N.x + N.y + N.z + 4;
+  steps = 0u;
   for (int n = 0; n < cap; ++n) {
     steps = uint(n + 1);
     int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
@@ -53,7 +78,7 @@ bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tH
       float den = dot(d, nn);
       if (abs(den) > 1e-12) {
         float tp = (off - dot(o - centre, nn)) / den;
-        if (tp >= t - margin && tp <= tNext + margin && tp >= t0 && tp <= t1) {
+        if (tp >= t - margin && tp <= tNext + margin && tp >= tAccept && tp <= t1) {
           tHit = tp;
           nHit = den > 0.0 ? -nn : nn;
           return true;
@@ -67,6 +92,45 @@ bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tH
     tMax[a] += tDelta[a];
   }
   return false;
+}
+
+// gdm.cpp traceGuided: a ray crossing 12 voxels or more (gdm.h kDirectVoxels) jumps by the
+// function up to 4 times (kMaxJumps), each jump taken only where the voxel half a voxel before its
+// landing point is empty, then walks from there. Counters: [7] rays that looked up, [6] misses
+// after jumping, [5] rays with a jump refused.
+bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tHit, out vec3 nHit, out uint steps,
+              out bool touched) {
+  touched = false;
+  ivec3 N = ivec3(gdmWord[blk], gdmWord[blk + 1u], gdmWord[blk + 2u]);
+  vec3 vs = vec3(uintBitsToFloat(gdmWord[blk + 3u]), uintBitsToFloat(gdmWord[blk + 4u]), uintBitsToFloat(gdmWord[blk + 5u]));
+  float crossed = (t1 - t0) * dot(abs(d), 1.0 / vs);
+  if (gdmWord[blk + 6u] == 0u || crossed < 12.0)
+    return gdmWalk(c, blk, o, d, t0, t1, t0, tHit, nHit, steps, touched);
+  countEvent(7u);
+  vec3 lo = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x);
+  float unit = min(min(vs.x, vs.y), vs.z), len = length(d);
+  float t = t0;
+  uint jumps = 0u;
+  bool failed = false;
+  while (jumps < 4u && t < t1) {
+    ivec3 idx = clamp(ivec3(floor((o + d * t - lo) / vs)), ivec3(0), N - 1);
+    ++jumps;
+    float skip = (gdmLookup(blk, N, idx, d) - 0.5) * unit / len;
+    if (skip < unit / len) break;
+    float tn = min(t + skip, t1);
+    ivec3 b = clamp(ivec3(floor((o + d * (tn - 0.5 * unit / len) - lo) / vs)), ivec3(0), N - 1);
+    if (gdmWord[blk + 8u + uint((b.z * N.y + b.y) * N.x + b.x)] != 0u) {
+      failed = true;
+      break;
+    }
+    t = tn;
+  }
+  uint walked = 0u;
+  bool hit = t < t1 && gdmWalk(c, blk, o, d, t, t1, t0, tHit, nHit, walked, touched);
+  if (failed) countEvent(5u);
+  else if (!hit) countEvent(6u);
+  steps = walked + jumps;
+  return hit;
 }
 
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
@@ -98,6 +162,6 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   float t;
   vec3 n;
   uint steps;
-  bool touched;
-  return gdmTrace(c, blk, p, l, start, tExit, t, n, steps, touched);
+  bool touched = false;
+  return gdmWalk(c, blk, p, l, start, tExit, start, t, n, steps, touched);
 }

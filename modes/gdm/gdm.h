@@ -6,8 +6,12 @@
 // SOURCE samples near the voxel (points: every voxel within 0.75 sample spacings of a point;
 // triangles: samples half a voxel apart), never its height map - and the 3-D DDA
 // (Amanatides & Woo) that finds the first surfel along a ray entering through any face or
-// starting inside the box. What is not built yet: the generalized displacement function over the
-// sphere of directions and its compression (000 §3-4), which would replace most of the DDA.
+// starting inside the box. On top of the grid, the generalized displacement function (000 §3.1):
+// for every voxel centre and 16 x 32 directions over the full sphere, the distance to the first
+// occupied voxel (a lower bound over the bin's neighbours and the voxel's face neighbours),
+// SVD-compressed (000 §4.1) with the rank chosen by its error; a ray that crosses many voxels
+// jumps by it a few times, each jump checked against the occupancy half a voxel before it lands,
+// and walks the DDA from there.
 #pragma once
 #include <cstdint>
 #include <functional>
@@ -23,11 +27,25 @@ namespace sa::gdm {
 // One voxel: 0 = empty; else bits 0-15 the surfel normal (octahedral, 8 + 8 bits, frame
 // coordinates), bits 16-31 the plane's offset from the voxel centre along that normal, a signed
 // 16-bit fraction of half the voxel diagonal.
+// The generalized displacement function of a grid, compressed: M[row][col] ~ sum_k u[row][k]
+// v[col][k], row = (y nx + x) kPhiBins + phi bin, col = z kThetaBins + theta bin; a value is the
+// distance from the voxel centre along the bin's central direction to where the ray enters the
+// first occupied voxel (0 inside one), or to the box where it meets none, in units of the
+// smallest voxel side. Directions (cell frame): theta from +w, bin i centred at (i + 1/2) pi / 16;
+// phi = atan2(v, u), bin j centred at 2 pi j / 32. u and v hold IEEE half values (as stored).
+inline constexpr int kThetaBins = 16, kPhiBins = 32, kMaxRank = 16;
+struct Function {
+  int rank = 0;  // 0: none (too large for the bake's limits: the DDA alone)
+  std::vector<float> u, v;
+  double p95 = 0, p99 = 0;  // reconstruction error over every entry (voxel units)
+};
+
 struct CellGrid {
   uint32_t cell = 0;
   int nx = 0, ny = 0, nz = 0;
   double vx = 0, vy = 0, vz = 0;  // voxel sizes (frame units)
   std::vector<uint32_t> voxels;   // x fastest, then y, then z
+  Function fn;
   uint32_t at(int x, int y, int z) const { return voxels[(size_t(z) * ny + y) * nx + x]; }
 };
 
@@ -49,15 +67,40 @@ CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double 
 bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
            double& tHit, Eigen::Vector3d* normal = nullptr, uint32_t* steps = nullptr, bool* touched = nullptr);
 
-// Reads the pack's sources (NOTE) and builds every forced cell's grid. progress(done, total).
+// The function's raw values (rows x cols, as Function describes), by walking every voxel centre
+// along every bin's central direction.
+std::vector<float> sampleFunction(const CellGrid& g);
+// Computes g.fn: the rank-k truncated SVD of sampleFunction(g), the smallest k <= kMaxRank whose
+// p95 error is at most maxError voxels (else kMaxRank); none when the grid is larger than the
+// bake allows (more than maxEntries values, or more than 2048 columns).
+void bakeFunction(CellGrid& g, double maxError = 0.5, uint64_t maxEntries = uint64_t(1) << 25);
+// The function at voxel (x, y, z) for direction d (frame, any length): the nearest bin's value.
+double lookup(const CellGrid& g, int x, int y, int z, const Eigen::Vector3d& d);
+
+// What the function-guided trace did (the shader's counters): walked without a lookup (no
+// function, or a ray crossing fewer than kDirectVoxels voxels: the walk is as cheap as lookups),
+// a hit or a miss after its jumps, or a jump refused by its check (then walked from where the
+// ray was).
+enum class Guided { kNone, kHit, kMiss, kFallback };
+inline constexpr int kDirectVoxels = 12, kMaxJumps = 4;
+// The shader's cast in double: with a function and a long enough ray, up to kMaxJumps lookups,
+// each jumping from the voxel the ray has reached by the function's value less half a voxel,
+// each taken only where the voxel half a voxel before its landing point is empty; then the DDA
+// from there, as trace (hits count from t0).
+bool traceGuided(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0,
+                 double t1, double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched, Guided* how = nullptr);
+
+// Reads the pack's sources (NOTE) and builds every forced cell's grid and its function.
+// progress(done, total).
 Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack,
                                                const std::function<void(uint64_t, uint64_t)>& progress = nullptr);
 
 // The pack section `GDMV` (docs/FORMAT.md).
 inline constexpr char kSectionId[4] = {'G', 'D', 'M', 'V'};
-inline constexpr uint32_t kSectionVersion = 1;
+inline constexpr uint32_t kSectionVersion = 2;  // 1: voxels only
 inline constexpr uint32_t kNoEntry = 0xffffffffu;
-inline constexpr int kBlockHeaderWords = 8;  // nx, ny, nz, vx, vy, vz (f32 bits), zero, zero
+// nx, ny, nz, vx, vy, vz (f32 bits), the function's rank, the first word of its u (from the block's start)
+inline constexpr int kBlockHeaderWords = 8;
 struct SectionHeader {
   uint32_t version, cellCount, gridCells, zero0;
   double bakeSeconds;

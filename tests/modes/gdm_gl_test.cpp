@@ -2,8 +2,8 @@
 // (cells that are not height fields), beside parallax on the same pixels: a thin wire loop and a
 // mushroom (a thin cap overhanging its stem), each as a mesh and as points; orbit views (entries
 // through the side faces), views from above and below (top and bottom faces), and a camera
-// inside a forced cell. The CPU traversal (gdm::trace over the baked section) must agree with the
-// shader.
+// inside a forced cell. The CPU cast (gdm::traceGuided over the baked section: the direction
+// function's jumps, then the DDA) must agree with the shader.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -244,7 +244,7 @@ class GdmGl : public test::GlTest {
           double t;
           ++drawn;
           bool touched = false;
-          bool hit = t0 < t1 && gdm::trace(c, grid, o, d, t0, t1, t, nullptr, nullptr, &touched);
+          bool hit = t0 < t1 && gdm::traceGuided(c, grid, o, d, t0, t1, t, nullptr, nullptr, &touched);
           if (!hit && !touched && t0 < t1) {  // no occupied voxel passed: the cell's height field, as the shader
             std::vector<uint16_t> pyr;
             exact::buildCellPyramid(p, c, pyr);
@@ -257,14 +257,18 @@ class GdmGl : public test::GlTest {
       EXPECT_GE(double(agree), 0.99 * double(drawn)) << name;
     }
     Score g, par;
+    WorkCounters work;
     for (size_t v = 0; v < cams.size(); ++v) {
       const std::vector<float> rd = referenceDepth(ref, cams[v]);
       RenderSettings rs;
       rs.cull.subpixelSplats = false;
       FrameResult fg, fp;
       rs.mode = RenderMode::kGdm;
+      rs.countWork = true;
       ASSERT_TRUE(r.render(cams[v], rs, fg, kReadDepth | kReadCells).isOk());
       ASSERT_EQ(fg.stats.drawnMode, RenderMode::kGdm);
+      work.add(fg.stats.work);
+      rs.countWork = false;
       rs.mode = RenderMode::kParallax;
       ASSERT_TRUE(r.render(cams[v], rs, fp, kReadDepth | kReadCells).isOk());
       const Score sg = score(p, cams[v], rd, fg, spacing), sp = score(p, cams[v], rd, fp, spacing);
@@ -273,8 +277,13 @@ class GdmGl : public test::GlTest {
       g.add(sg);
       par.add(sp);
     }
-    std::printf("[gdm-gl] %s (%zu forced cells): gdm IoU %.4f depth p95 %.2f spacings; parallax IoU %.4f p95 %.2f\n", name.c_str(),
-                forced, g.iou(), g.p95(), par.iou(), par.p95());
+    std::printf("[gdm-gl] %s (%zu forced cells): gdm IoU %.4f depth p95 %.2f spacings; parallax IoU %.4f p95 %.2f; "
+                "function lookups %llu (%.1f%% of the casts), a jump refused on %.1f%% of them; work per cast mean %.1f\n",
+                name.c_str(), forced, g.iou(), g.p95(), par.iou(), par.p95(), (unsigned long long)work.lookups,
+                100.0 * double(work.lookups) / double(std::max<uint64_t>(work.rays, 1)),
+                100.0 * double(work.fallbacks) / double(std::max<uint64_t>(work.lookups, 1)), work.mean());
+    EXPECT_GT(work.lookups, 0u) << name;
+    EXPECT_LE(work.fallbacks, work.lookups / 5) << name;
     EXPECT_GE(g.iou(), 0.98) << name;
     EXPECT_LE(g.p95(), 1.0) << name;
     EXPECT_TRUE(g.iou() > par.iou() || g.p95() < par.p95()) << name << ": gdm must beat parallax on forced pixels";

@@ -1,0 +1,151 @@
+// The gdm mode's direction function on the CPU (modes/gdm/gdm.h), on the forced cells of real
+// packs (the bunny's raw scans: points; the dragon: a mesh): the function-guided trace the shader
+// mirrors (one lookup, a check, a short walk) against the whole DDA, which is the reference, over
+// rays entering through every face, rays from inside the box and grazing rays; and the function's
+// own values against the walks they compress.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include "modes/gdm/gdm.h"
+#include "preprocess/pipeline.h"
+#include "../common/test_util.h"
+
+namespace sa {
+namespace {
+
+struct Tally {
+  size_t cells = 0, rays = 0, agree = 0, lookups = 0, fallbacks = 0, hits = 0;
+  uint64_t stepsWalk = 0, stepsGuided = 0;
+  double rankSum = 0;
+  void print(const char* name) const {
+    std::printf("[gdm-fn] %s: %zu cells with a function (mean rank %.1f), %zu rays, %zu hits; guided agrees with the whole "
+                "walk on %.3f%%; %zu lookups, %.1f%% of them fell back; voxels per ray: walk %.2f, guided %.2f (a lookup "
+                "counted as one)\n", name, cells, cells ? rankSum / double(cells) : 0.0, rays, hits,
+                100.0 * double(agree) / double(rays), lookups, 100.0 * double(fallbacks) / double(std::max<size_t>(lookups, 1)),
+                double(stepsWalk) / double(rays), double(stepsGuided) / double(rays));
+  }
+};
+
+// Rays through cell c's box: a quarter from inside, a quarter grazing its plane, the rest from
+// outside through any face; each traced by the whole walk and by the guided trace.
+void castRays(const CellRecord& c, const gdm::CellGrid& g, int count, std::mt19937& rng, Tally& t) {
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::normal_distribution<double> gauss;
+  ++t.cells;
+  t.rankSum += g.fn.rank;
+  const Eigen::Vector3d lo(c.box[0], c.box[2], c.box[4]), hi(c.box[1], c.box[3], c.box[5]), size = hi - lo;
+  for (int k = 0; k < count; ++k) {
+    const Eigen::Vector3d inBox = lo + Eigen::Vector3d(unit(rng), unit(rng), unit(rng)).cwiseProduct(size);
+    Eigen::Vector3d d(gauss(rng), gauss(rng), gauss(rng)), o;
+    if (k % 4 == 2) d.z() *= 0.02;
+    d.normalize();
+    o = k % 4 == 3 ? inBox : Eigen::Vector3d(inBox - d * (2 * size.norm()));
+    double t0 = 0, t1 = 1e300;
+    for (int a = 0; a < 3; ++a) {
+      if (d[a] == 0) continue;
+      double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (!(t0 < t1)) continue;
+    ++t.rays;
+    double tw = 0, tg = 0;
+    bool touchedW = false, touchedG = false;
+    uint32_t sw = 0, sg = 0;
+    gdm::Guided how;
+    const bool hw = gdm::trace(c, g, o, d, t0, t1, tw, nullptr, &sw, &touchedW);
+    const bool hg = gdm::traceGuided(c, g, o, d, t0, t1, tg, nullptr, &sg, &touchedG, &how);
+    t.hits += hw;
+    t.stepsWalk += sw;
+    t.stepsGuided += sg;
+    t.fallbacks += how == gdm::Guided::kFallback;
+    t.lookups += how != gdm::Guided::kNone;
+    const double voxel = std::min({g.vx, g.vy, g.vz});
+    // Same answer: the same hit within a hundredth of a voxel, or a miss both ways that passed
+    // surfels or not alike (the shader draws the height field where none was passed).
+    t.agree += hw == hg && (hw ? std::abs(tw - tg) <= 0.01 * voxel : touchedW == touchedG);
+  }
+}
+
+// A 40 x 40 x 20 grid of unit voxels holding a thin spherical shell and a slanted plate, the
+// kind of cell the function is for (long rays over empty space): the guided trace must agree
+// with the walk and walk fewer voxels.
+TEST(GdmFunction, LargeSyntheticCellWalksLessAndAgrees) {
+  CellRecord c{};
+  c.u[0] = c.v[1] = c.w[2] = 1;
+  c.tileW = 40;
+  c.tileH = 40;
+  const double box[6] = {0, 40, 0, 40, 0, 20};
+  std::copy(box, box + 6, c.box);
+  gdm::CellGrid g;
+  g.nx = g.ny = 40;
+  g.nz = 20;
+  g.vx = g.vy = g.vz = 1;
+  g.voxels.assign(size_t(40) * 40 * 20, 0);
+  const Eigen::Vector3d C(26, 16, 10), vs(1, 1, 1), plateN = Eigen::Vector3d(-0.2, 0.1, 1).normalized();
+  for (int z = 0; z < 20; ++z)
+    for (int y = 0; y < 40; ++y)
+      for (int x = 0; x < 40; ++x) {
+        const Eigen::Vector3d p(x + 0.5, y + 0.5, z + 0.5);
+        const double r = (p - C).norm(), plate = plateN.dot(p - Eigen::Vector3d(0, 0, 5));
+        uint32_t& v = g.voxels[(size_t(z) * 40 + y) * 40 + x];
+        if (std::abs(r - 7) < 0.75) v = gdm::encodeVoxel((p - C).normalized(), 7 - r, vs);
+        else if (std::abs(plate) < 0.75) v = gdm::encodeVoxel(plateN, -plate, vs);
+      }
+  gdm::bakeFunction(g);
+  ASSERT_GT(g.fn.rank, 0);
+  std::mt19937 rng(9);
+  Tally t;
+  castRays(c, g, 40000, rng, t);
+  t.print("synthetic shell and plate, 40x40x20");
+  EXPECT_GT(t.hits, t.rays / 4);
+  EXPECT_GT(t.lookups, t.rays / 2);
+  EXPECT_LE(t.fallbacks, t.lookups / 5);
+  EXPECT_GE(double(t.agree), 0.99 * double(t.rays));
+  EXPECT_LT(double(t.stepsGuided), 0.7 * double(t.stepsWalk));
+}
+
+struct GdmCase {
+  const char* name;
+  const char* source;
+};
+
+class GdmFunctionOnPacks : public ::testing::TestWithParam<GdmCase> {};
+
+// The forced cells of real packs are small (a few to a few dozen voxels a side): most rays walk
+// without a lookup; where they look up, the answer must be the walk's.
+TEST_P(GdmFunctionOnPacks, GuidedTraceAgreesWithTheWholeWalk) {
+  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
+  test::TempDir dir;
+  auto input = InputSet::open({test::sharedData(GetParam().source)});
+  ASSERT_TRUE(input.isOk());
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*input, dir.file("p.hfa"), PackOptions{}, nullptr, sum).isOk());
+  PackReader pack;
+  ASSERT_TRUE(pack.open(dir.file("p.hfa")).isOk());
+  auto grids = gdm::buildForcedGrids(pack);
+  ASSERT_TRUE(grids.isOk()) << grids.status().message();
+  std::mt19937 rng(5);
+  Tally t;
+  for (const gdm::CellGrid& g : *grids)
+    if (g.fn.rank > 0) castRays(pack.cells()[g.cell], g, 300, rng, t);
+  t.print(GetParam().name);
+  EXPECT_GT(t.cells, 10u);
+  EXPECT_GT(t.hits, t.rays / 10);
+  EXPECT_GT(t.lookups, 0u);
+  EXPECT_LE(t.stepsGuided, t.stepsWalk + t.lookups);  // never more than the lookups themselves
+  EXPECT_GE(double(t.agree), 0.99 * double(t.rays));
+}
+
+INSTANTIATE_TEST_SUITE_P(RealPacks, GdmFunctionOnPacks,
+                         ::testing::Values(GdmCase{"BunnyScans", "stanford_bunny/scans/bun.conf"},
+                                           GdmCase{"DragonMesh", "stanford_dragon/reconstruction/dragon_vrip.ply"}),
+                         [](const auto& info) { return std::string(info.param.name); });
+
+}  // namespace
+}  // namespace sa
