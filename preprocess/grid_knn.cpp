@@ -74,20 +74,25 @@ int64_t GridKnn::findCell(uint64_t key) const {
   return -1;
 }
 
+template <class F>
+void GridKnn::forCells(const int64_t a[3], const int64_t b[3], F visit) const {
+  for (int64_t z = a[2]; z <= b[2]; ++z)
+    for (int64_t y = a[1]; y <= b[1]; ++y)
+      for (int64_t x = a[0]; x <= b[0]; ++x) {
+        const int64_t ci = findCell(keyOf(x, y, z));
+        if (ci >= 0) visit(cells_[size_t(ci)]);
+      }
+}
+
 void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
   out.index.clear();
   out.xyz.clear();
   int64_t a[3], b[3];
   for (int k = 0; k < 3; ++k) a[k] = std::max<int64_t>(0, c[k] - ring), b[k] = std::min(dims_[k] - 1, c[k] + ring);
-  for (int64_t z = a[2]; z <= b[2]; ++z)
-    for (int64_t y = a[1]; y <= b[1]; ++y)
-      for (int64_t x = a[0]; x <= b[0]; ++x) {
-        const int64_t ci = findCell(keyOf(x, y, z));
-        if (ci < 0) continue;
-        const Cell& cc = cells_[size_t(ci)];
-        out.index.insert(out.index.end(), order_.begin() + cc.begin, order_.begin() + cc.end);
-        out.xyz.insert(out.xyz.end(), sorted_.begin() + 3 * long(cc.begin), sorted_.begin() + 3 * long(cc.end));
-      }
+  forCells(a, b, [&](const Cell& cc) {
+    out.index.insert(out.index.end(), order_.begin() + cc.begin, order_.begin() + cc.end);
+    out.xyz.insert(out.xyz.end(), sorted_.begin() + 3 * long(cc.begin), sorted_.begin() + 3 * long(cc.end));
+  });
 }
 
 // The k smallest (d2, index) of point i over `cand` into scratch (ascending), then, where the
@@ -192,19 +197,14 @@ void GridKnn::within(const double* q, double radius, std::vector<std::pair<doubl
     b[k] = hi > double(dims_[k] - 1) ? dims_[k] - 1 : int64_t(hi);
   }
   const double r2 = radius * radius;
-  for (int64_t z = a[2]; z <= b[2]; ++z)
-    for (int64_t y = a[1]; y <= b[1]; ++y)
-      for (int64_t x = a[0]; x <= b[0]; ++x) {
-        const int64_t ci = findCell(keyOf(x, y, z));
-        if (ci < 0) continue;
-        const Cell& cc = cells_[size_t(ci)];
-        for (uint32_t o = cc.begin; o < cc.end; ++o) {
-          const double* p = &sorted_[3 * size_t(o)];
-          const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-          const double d2 = dx * dx + dy * dy + dz * dz;
-          if (d2 <= r2) out.emplace_back(d2, order_[o]);
-        }
-      }
+  forCells(a, b, [&](const Cell& cc) {
+    for (uint32_t o = cc.begin; o < cc.end; ++o) {
+      const double* p = &sorted_[3 * size_t(o)];
+      const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      if (d2 <= r2) out.emplace_back(d2, order_[o]);
+    }
+  });
   std::sort(out.begin(), out.end());
 }
 

@@ -53,6 +53,9 @@ class GridKnn {
     std::vector<uint32_t> index;
     std::vector<double> xyz;  // their positions, contiguous (the loop over them stays in cache)
   };
+  // visit(cell) for every non-empty cell of the block [a, b] (cell coordinates, inclusive).
+  template <class F>
+  void forCells(const int64_t a[3], const int64_t b[3], F visit) const;
   // Candidates in the cube of cells within `ring` of cell c (ring 1: 3x3x3).
   void gather(const int64_t c[3], int ring, Candidates& out) const;
   void nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best) const;
