@@ -10,6 +10,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 
 namespace sa {
@@ -197,16 +198,26 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   std::vector<double> src(pos, pos + 3 * n);
   const Spacing sp = estimateSpacing(src.data(), n);
   const GridKnn grid(src.data(), n, GridKnn::cellFor(sp.area > 0 ? sp.area : sp.nearest, k));
+  // Progress: 2n units, the density pass n of them (when there is one).
+  std::atomic<size_t> units{0};
+  auto tick = [&](size_t u) {  // reports in steps of 4096 units
+    if (!opt.progress) return;
+    const size_t before = units.fetch_add(u, std::memory_order_relaxed), steps = ((before + u) >> 12) - (before >> 12);
+    if (steps) opt.progress(steps << 12);
+  };
   std::vector<float> density;
   if (opt.outlierRatio > 0) {  // per point: the mean distance to its kDensityNeighbours nearest (local density)
     density.assign(n, 0.f);
     grid.forEach(int(std::min<size_t>(kDensityNeighbours + 1, n)), [&](size_t i, const int*, const double* d2, int m) {
+      tick(1);
       double sum = 0;
       for (int j = 1; j < m; ++j) sum += std::sqrt(d2[j]);  // [0] is the point itself
       density[i] = m > 1 ? float(sum / (m - 1)) : 0.f;
     });
   }
+  const size_t perFit = density.empty() ? 2 : 1;
   grid.forEach(k, [&](size_t i, const int* in, const double* dist, int m) {
+    tick(perFit);
     const Eigen::Vector3d p(&src[3 * i]);
     if (localSpacing) {
       const int j = std::min(m - 1, kDensityNeighbours);  // [0] is the point itself

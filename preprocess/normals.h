@@ -5,6 +5,7 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -28,6 +29,9 @@ struct SurfaceOptions {
   // A point whose mean distance to its 8 nearest neighbours exceeds this many times the
   // median of its neighbours' is an outlier (0: keep all).
   double outlierRatio = 3;
+  // Progress of long fits, called now and then from any thread with the units done since the
+  // last call; the whole fit is 2 units a point. May be empty.
+  std::function<void(size_t)> progress;
 };
 
 // The surface through a chunk's points, from one k-nearest-neighbour query per point (FLANN):

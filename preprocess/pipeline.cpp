@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -36,6 +37,29 @@ struct WorkCell {
   uint32_t chunk = 0, first = 0, count = 0;  // range of the chunk's points (cell order), surface samples included
   double ext[6] = {0, 0, 0, 0, 0, 0};        // point extents in the frame: uMin uMax vMin vMax wMin wMax
   bool sampled = false;                      // holds points sampled on large triangles
+};
+
+// Progress from inside one chunk's parallel loops: threads add the points they finished; the
+// one that takes the lock reports (the others never wait), at most every 16384 points.
+class ChunkTicker {
+ public:
+  // unitsPerPoint: what add() counts per point of the chunk.
+  ChunkTicker(const ProgressFn& fn, const char* phase, uint64_t before, uint64_t chunk, uint64_t total,
+              uint64_t unitsPerPoint = 1)
+      : fn_(fn), phase_(phase), before_(before), chunk_(chunk), total_(total), per_(unitsPerPoint) {}
+  void add(uint64_t n) {
+    const uint64_t d = done_ += n;
+    if (!fn_ || (d >> 14) == ((d - n) >> 14) || !mu_.try_lock()) return;
+    fn_(phase_, before_ + std::min(d / per_, chunk_), total_);
+    mu_.unlock();
+  }
+
+ private:
+  const ProgressFn& fn_;
+  const char* phase_;
+  uint64_t before_, chunk_, total_, per_;
+  std::atomic<uint64_t> done_{0};
+  std::mutex mu_;
 };
 
 // What the phases of one pack share.
@@ -168,7 +192,7 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
 // Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h).
 // Drops the outliers from pts, pos and nrm.
 void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
-                     double chunkSpacing) {
+                     double chunkSpacing, ChunkTicker& ticker) {
   NormalOrientation orient;
   orient.towardScanner = job.input.towardScanner();
   orient.center = job.bounds.centroid - job.origin;
@@ -179,6 +203,7 @@ void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<dou
   so.estimateNormals = !job.fileNormals;
   so.smooth = job.opt.smooth;
   so.outlierRatio = job.opt.outlierRatio;
+  so.progress = [&](size_t n) { ticker.add(n); };
   std::vector<uint8_t> keep;
   std::vector<float> local(pts.size(), 0.f);
   const size_t removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data());
@@ -250,7 +275,7 @@ void addCells(PackJob& job, uint32_t ci, const std::vector<OctreeCell>& oc, cons
 }
 
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
-Status chunkCells(PackJob& job, uint32_t ci) {
+Status chunkCells(PackJob& job, uint32_t ci, uint64_t before) {
   const ChunkInfo& ch = job.dist.chunks[ci];
   std::vector<ChunkPoint> pts;
   std::vector<double> pos;
@@ -267,7 +292,8 @@ Status chunkCells(PackJob& job, uint32_t ci) {
     job.areaSpacingSum += std::max(spacing.area, sp) * double(pts.size());
     job.spacingWeight += pts.size();
   }
-  if (!job.triangles) fitChunkSurface(job, pts, pos, nrm, sp);
+  ChunkTicker ticker(job.progress, "octree", before, pts.size(), job.bounds.count + job.dist.surfaceSamples, 2);
+  if (!job.triangles) fitChunkSurface(job, pts, pos, nrm, sp, ticker);
   job.chunkSpacing[ci] = sp;
   const size_t n = pts.size();
   std::vector<uint32_t> idx(n);
@@ -312,10 +338,13 @@ Status cellsPhase(PackJob& job) {
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
   job.chunkSpacing.assign(job.dist.chunks.size(), 0.0);
   uint64_t processed = 0;
+  const uint64_t total = job.bounds.count + job.dist.surfaceSamples;
+  if (job.progress) job.progress("octree", 0, total);
   for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
-    processed += job.dist.chunks[ci].count;
-    SA_RETURN_IF_ERROR(chunkCells(job, ci));
-    if (job.progress) job.progress("octree", processed, job.bounds.count + job.dist.surfaceSamples);
+    const uint64_t count = job.dist.chunks[ci].count;  // before outliers are dropped
+    SA_RETURN_IF_ERROR(chunkCells(job, ci, processed));
+    processed += count;
+    if (job.progress) job.progress("octree", processed, total);
   }
   std::sort(job.sampleCells.begin(), job.sampleCells.end());
   job.sampleCells.erase(std::unique(job.sampleCells.begin(), job.sampleCells.end()), job.sampleCells.end());
@@ -658,7 +687,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::
 }
 
 // ---- pass B, one chunk: every cell's tile ----
-Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer) {
+Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer, ChunkTicker& ticker) {
   std::vector<ChunkPoint> pts;
   std::vector<double> pos;
   SA_RETURN_IF_ERROR(loadChunk(job.dist.chunks[ci], pts));
@@ -698,6 +727,7 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
       }
       Status s = writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
                                   withColor ? tile.rgba.data() : nullptr);
+      ticker.add(job.cells[id].count);
       if (!s) {
         std::lock_guard<std::mutex> lock(failMu);
         failed = s;
@@ -711,10 +741,14 @@ Status tilesPhase(PackJob& job, PackWriter& writer) {
   std::vector<std::vector<uint32_t>> chunkCellIds(job.dist.chunks.size());
   for (uint32_t i = 0; i < job.cells.size(); ++i) chunkCellIds[job.cells[i].chunk].push_back(i);
   uint64_t processed = 0;
+  const uint64_t total = job.bounds.count + job.dist.surfaceSamples;
+  if (job.progress) job.progress("heightmaps", 0, total);
   for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
-    SA_RETURN_IF_ERROR(chunkTiles(job, ci, chunkCellIds[ci], writer));
+    ChunkTicker ticker(job.progress, "heightmaps", processed, job.dist.chunks[ci].count, total);
+    SA_RETURN_IF_ERROR(chunkTiles(job, ci, chunkCellIds[ci], writer, ticker));
     processed += job.dist.chunks[ci].count;
-    if (job.progress) job.progress("heightmaps", processed, job.bounds.count + job.dist.surfaceSamples);
+    // The chunks hold the points left after outlier removal: the last one ends the phase.
+    if (job.progress) job.progress("heightmaps", ci + 1 == job.dist.chunks.size() ? total : processed, total);
   }
   return Status::ok();
 }

@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <map>
+#include <mutex>
 #include <sstream>
 
 #include "../common/test_util.h"
@@ -426,6 +428,44 @@ TEST(Pipeline, AMeshWhoseTrianglesChangeIsRepacked) {
   ASSERT_TRUE(packInput(*in2, d.file("m.hfa"), PackOptions{}, nullptr, c).isOk());
   EXPECT_FALSE(c.upToDate);
   EXPECT_NE(c.inputHash, a.inputHash);
+}
+
+}  // namespace
+}  // namespace sa
+
+namespace sa {
+namespace {
+
+// Long phases report progress from inside a chunk, not only when a chunk ends: a one-chunk pack
+// of the bunny's scans (about 360k points) moves its octree (normals) and heightmaps bars in
+// steps, each phase starting at 0 and ending at its total, never going back.
+TEST(Pipeline, ProgressMovesInsideAChunk) {
+  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
+  test::TempDir dir;
+  auto input = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
+  ASSERT_TRUE(input.isOk());
+  std::mutex mu;
+  std::map<std::string, std::vector<std::pair<uint64_t, uint64_t>>> seen;
+  const ProgressFn progress = [&](const char* phase, uint64_t done, uint64_t total) {
+    std::lock_guard<std::mutex> lock(mu);
+    seen[phase].emplace_back(done, total);
+  };
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*input, dir.file("p.hfa"), PackOptions{}, progress, sum).isOk());
+  ASSERT_EQ(sum.chunks, 1u);
+  for (const char* phase : {"octree", "heightmaps"}) {
+    const auto& v = seen[phase];
+    ASSERT_GE(v.size(), 3u) << phase;
+    EXPECT_EQ(v.front().first, 0u) << phase;
+    EXPECT_EQ(v.back().first, v.back().second) << phase;
+    size_t inside = 0;
+    for (size_t i = 0; i < v.size(); ++i) {
+      if (i > 0) EXPECT_GE(v[i].first, v[i - 1].first) << phase;
+      inside += v[i].first > 0 && v[i].first < v[i].second;
+    }
+    std::printf("[progress] %s: %zu reports, %zu between 0 and the end\n", phase, v.size(), inside);
+    EXPECT_GE(inside, 5u) << phase;
+  }
 }
 
 }  // namespace
