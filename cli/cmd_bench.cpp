@@ -34,7 +34,7 @@ const char* kHelp =
     "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and the pack's up axis)\n"
     "  --warmup N             frames rendered before timing each configuration (default 10)\n"
     "  --frames N             timed frames per configuration (default 200)\n"
-    "  --mode LIST            parallax, exact, vdm, gdm, points (default parallax). exact, vdm\n"
+    "  --mode LIST            parallax, exact, vdm, gdm, slices, points (default parallax). exact, vdm\n"
     "                         and gdm need their section ('scanatlas bake PACK --mode M'); without\n"
     "                         it the mode's fallback is drawn and said. points: the source points\n"
     "                         as splats (reads the pack's source files). Per mode: its bytes on the\n"
@@ -42,6 +42,7 @@ const char* kHelp =
     "                         samples; the others: pyramid nodes, voxels; vdm, gdm: lookups and\n"
     "                         fallbacks) from one counted pass over the cameras after the timed frames\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
+    "  --slices N             slices mode: quads per cell (default 16)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
     "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
@@ -185,7 +186,7 @@ void printTable(const std::vector<Row>& rows, const std::string& renderer) {
 int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "csv"},
+                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "csv"},
                      {"compare-skips", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
@@ -216,6 +217,8 @@ int cmdBench(int argc, char** argv) {
   s = modesAndIterations(a, modes, iters);
   if (!s) return reportError(s);
   RenderSettings base;
+  s = slicesFromArgs(a, base);
+  if (!s) return reportError(s);
   base.useColor = !a.flag("no-color");
   base.cull.frustum = !a.flag("no-frustum-cull");
   base.cull.backfaceCull = !a.flag("no-backface-cull");

@@ -56,9 +56,10 @@ const char* kHelp =
     "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render (up\n"
     "                         defaults to the pack's up axis)\n"
     "  --mode LIST            parallax, exact, vdm, gdm (each needs 'scanatlas bake PACK --mode M',\n"
-    "                         else its fallback is drawn and said), points (default parallax); one\n"
-    "                         row per mode (per --iterations for parallax)\n"
+    "                         else its fallback is drawn and said), slices, points (default\n"
+    "                         parallax); one row per mode (per --iterations for parallax)\n"
     "  --iterations LIST      parallax step bounds (default 64)\n"
+    "  --slices N             slices mode: quads per cell (default 16)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
     "                         view; default 3)\n"
     "  --csv FILE             one row per view and configuration plus 'all' summary rows\n"
@@ -389,6 +390,8 @@ int runEval(const Args& a) {
   s = parseOptions(a, pack, o);
   if (!s) return reportError(s);
   RenderSettings base;
+  s = slicesFromArgs(a, base);
+  if (!s) return reportError(s);
   base.useColor = false;  // both images shaded alike
   std::unique_ptr<Reference> ref;
   if (a.has("reference")) {
@@ -462,7 +465,7 @@ int runEval(const Args& a) {
 int cmdEval(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "repeat",
+                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "repeat",
                       "csv", "plot"},
                      {"far", "json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {

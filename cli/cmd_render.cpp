@@ -38,7 +38,9 @@ const char* kHelp =
     "  --mode MODE            parallax (default: linear search + bisection), exact (min/max-mipmap\n"
     "                         traversal with the exact root; needs 'scanatlas bake PACK --mode exact'),\n"
     "                         vdm (view-dependent displacement lookups; needs 'scanatlas bake PACK\n"
-    "                         --mode vdm'); a mode the pack lacks draws its fallback and says so\n"
+    "                         --mode vdm'), gdm, slices (volumetric slices: --slices quads per cell,\n"
+    "                         needs nothing baked); a mode the pack lacks draws its fallback and says so\n"
+    "  --slices N             slices mode: quads per cell across the axis nearest the view (default 16)\n"
     "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
@@ -77,6 +79,7 @@ Status settingsFromArgs(const Args& a, RenderSettings& rs) {
     if (!v) return v.status();
     rs.iterations = static_cast<int>(*v);
   }
+  SA_RETURN_IF_ERROR(slicesFromArgs(a, rs));
   if (a.has("refine")) {
     auto v = parseInt("refine", a.get("refine"), 0, 64);
     if (!v) return v.status();
@@ -163,7 +166,7 @@ Status outputsFromArgs(const Args& a, size_t views, Outputs& out) {
 int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "refine",
+                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "refine",
                       "background", "shading", "clip-box", "section", "mode", "light"},
                      {"edl", "shadows", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});

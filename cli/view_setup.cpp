@@ -118,4 +118,12 @@ void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m
                modeName(r.drawnMode(m)), pack.path().c_str(), mi.name);
 }
 
+Status slicesFromArgs(const Args& a, RenderSettings& rs) {
+  if (!a.has("slices")) return Status::ok();
+  auto v = parseInt("slices", a.get("slices"), 1, kMaxSlices);
+  if (!v) return v.status();
+  rs.slices = int(*v);
+  return Status::ok();
+}
+
 }  // namespace sa

@@ -14,8 +14,8 @@
 
 namespace sa {
 
-enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4 };
-inline constexpr int kRenderModes = 5;
+enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4, kSlices = 5 };
+inline constexpr int kRenderModes = 6;
 
 // What a bake may be limited to (modes that bake per cell: vdm) and how it reports progress.
 struct BakeRequest {
@@ -35,6 +35,10 @@ struct ModeInfo {
   RenderMode needsMode;      // a mode whose section this one also needs (its own mode when none)
   const char* fallback;     // what a pack without the section draws instead
   const char* castUnit;     // the shader unit defining castCell (embedded by name), null for points
+  // Modes that draw their own geometry instead of casting in cell boxes (slices): their vertex
+  // and fragment shaders (embedded by name); null for the others.
+  const char* vertexShader = nullptr;
+  const char* fragmentShader = nullptr;
 };
 
 std::span<const ModeInfo> allModes();

@@ -279,6 +279,10 @@ static uint64_t uploadBlocks(uint32_t cellCount, const uint32_t* entries, uint64
 Status Renderer::initModes(const PackReader& pack) {
   Gl& g = *gl_;
   for (const ModeInfo& mi : allModes()) {
+    if (mi.vertexShader) {  // draws its own geometry (slices): one program, no box faces
+      SA_RETURN_IF_ERROR(link(mi.vertexShader, mi.fragmentShader, "", g.front[int(mi.mode)]));
+      continue;
+    }
     if (!mi.castUnit) continue;
     if (mi.mode == RenderMode::kExact) {
       auto v = exact::readSection(pack);
@@ -587,8 +591,18 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
   };
   const int m = int(drawnMode(s.mode));
-  drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
-  drawList(vis.inside, g.inside[m], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+  if (modeInfo(RenderMode(m)).vertexShader) {
+    // Slices: every visible cell the same way, whether the camera is inside its box or not.
+    glDisable(GL_CULL_FACE);
+    const int n = std::clamp(s.slices, 1, kMaxSlices);
+    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceCount"), n);
+    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceAxis"), s.sliceAxis);
+    drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 6 * n);
+    drawList(vis.inside, g.front[m], GL_BACK, GL_TRIANGLES, 6 * n);
+  } else {
+    drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
+    drawList(vis.inside, g.inside[m], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+  }
   glDisable(GL_CULL_FACE);
   drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
   if (!s.showBoxes) return;

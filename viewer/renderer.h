@@ -28,6 +28,8 @@ struct ClipSettings {
   Eigen::Vector3d point = Eigen::Vector3d::Zero(), normal = Eigen::Vector3d::UnitZ();
 };
 
+inline constexpr int kMaxSlices = 1024;
+
 struct RenderSettings {
   RenderMode mode = RenderMode::kParallax;
   Shading shading = Shading::kLambert;
@@ -46,6 +48,8 @@ struct RenderSettings {
   float baseColor[3] = {0.85f, 0.82f, 0.78f};
   CullOptions cull;      // what a frame may skip (all on by default)
   bool countWork = false;  // read the work counters back (FrameStats::work); costs atomics per fragment
+  int slices = 16;         // slices mode: quads per cell (1..kMaxSlices)
+  int sliceAxis = -1;      // slices mode: -1 the axis nearest the view, per cell; 0, 1, 2: u, v or w always
   // Self-shadowing (001 §3.2): a second cast from each hit toward the light (lightDir; needs
   // headLight off), within the hit's cell, by the mode's own cast (vdm: a lookup).
   bool shadows = false;
