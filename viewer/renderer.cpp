@@ -597,8 +597,8 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     const int n = std::clamp(s.slices, 1, kMaxSlices);
     glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceCount"), n);
     glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceAxis"), s.sliceAxis);
-    drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 6 * n);
-    drawList(vis.inside, g.front[m], GL_BACK, GL_TRIANGLES, 6 * n);
+    drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));  // the slices and two far faces
+    drawList(vis.inside, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));
   } else {
     drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
     drawList(vis.inside, g.inside[m], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces

@@ -12,6 +12,8 @@
 in vec3 vFrame;
 flat in int vCell;
 flat in vec3 vCamFrame;
+flat in int vAxis;
+flat in float vSpacing;
 
 uniform float nearPlane;
 uniform vec3 viewForward;   // world forward axis of the camera
@@ -26,9 +28,11 @@ layout(location = 3) out uint outCell;    // the cell's index + 1
 void main() {
   Cell c = cells[vCell];
   vec3 p = vFrame;
-  // Inside: under the covered surface (the height field's solid), reached through the surface:
-  // a ray that entered the box already under it came through the sheet's side or underside,
-  // which the cast modes do not draw either.
+  // Inside: under the covered surface (the height field's solid), and the first slice inside
+  // after a point above it: the previous slice's point on this ray (or, before the first, where
+  // the ray entered the box) lies above the surface or off it. A ray that entered the box under
+  // the surface meets the sheet's side or underside first, which the cast modes do not draw
+  // either; one that rises out of the solid and falls back in is drawn where it falls back.
   float h = sampleHeight(c, p.xy);
   bool inside = h != kUncovered && p.z <= h;
   if (inside) {
@@ -36,9 +40,14 @@ void main() {
     vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
     vec3 t0 = (bmin - vCamFrame) / d, t1 = (bmax - vCamFrame) / d;
     float tEnter = max(max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z)), 0.0);
-    vec3 e = vCamFrame + d * tEnter;
-    float he = sampleHeight(c, e.xy);
-    inside = he == kUncovered || e.z > he;
+    // The previous slice plane along the ray (p is at t = 1; on a slice itself, the one before).
+    int a = vAxis;
+    float k = (p[a] - bmin[a]) / max(vSpacing, 1e-30) - 1e-3 * sign(d[a]);
+    float prev = bmin[a] + (d[a] > 0.0 ? ceil(k) - 1.0 : floor(k) + 1.0) * vSpacing;
+    float tPrev = d[a] != 0.0 ? (prev - vCamFrame[a]) / d[a] : -1.0;
+    vec3 q = vCamFrame + d * max(tPrev, tEnter);
+    float hq = sampleHeight(c, q.xy);
+    inside = hq == kUncovered || q.z > hq;
   }
   if (!inside) discard;
   vec3 nWorld;

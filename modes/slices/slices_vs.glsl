@@ -18,6 +18,8 @@ layout(std430, binding = 1) readonly buffer DrawItems { uvec2 items[]; };  // (c
 out vec3 vFrame;            // the vertex in the cell's frame
 flat out int vCell;
 flat out vec3 vCamFrame;    // the camera in the cell's frame
+flat out int vAxis;         // the slicing axis: 0 u, 1 v, 2 w
+flat out float vSpacing;    // the slices' spacing along it
 
 const int kQuad[6] = int[6](0, 1, 2, 2, 1, 3);  // two triangles over the quad's corners
 
@@ -32,12 +34,22 @@ void main() {
   vec3 view = abs(0.5 * (lo + hi) - cam) / max(hi - lo, vec3(1e-30));
   int axis = sliceAxis >= 0 ? sliceAxis : (view.x >= view.y && view.x >= view.z ? 0 : (view.y >= view.z ? 1 : 2));
   int s = gl_VertexID / 6, corner = kQuad[gl_VertexID % 6];
-  if (cam[axis] > 0.5 * (lo[axis] + hi[axis])) s = sliceCount - 1 - s;  // front to back
-  // From face to face: a ray that enters the solid meets a slice before it leaves the box.
-  float at = sliceCount > 1 ? mix(lo[axis], hi[axis], float(s) / float(sliceCount - 1)) : 0.5 * (lo[axis] + hi[axis]);
-  int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+  int across = axis;
+  float at;
+  if (s < sliceCount) {
+    if (cam[axis] > 0.5 * (lo[axis] + hi[axis])) s = sliceCount - 1 - s;  // front to back
+    // From face to face: a ray that enters the solid meets a slice before it leaves the box
+    // through the slicing axis' faces...
+    at = sliceCount > 1 ? mix(lo[axis], hi[axis], float(s) / float(sliceCount - 1)) : 0.5 * (lo[axis] + hi[axis]);
+  } else {
+    // ...and the box's two far faces across the other axes close the last slab where a ray
+    // leaves through them.
+    across = (axis + 1 + s - sliceCount) % 3;
+    at = cam[across] < 0.5 * (lo[across] + hi[across]) ? hi[across] : lo[across];
+  }
+  int a1 = (across + 1) % 3, a2 = (across + 2) % 3;
   vec3 f;
-  f[axis] = at;
+  f[across] = at;
   f[a1] = (corner & 1) != 0 ? hi[a1] : lo[a1];
   f[a2] = (corner & 2) != 0 ? hi[a2] : lo[a2];
   vec3 world = rel + c.axisU.xyz * f.x + c.axisV.xyz * f.y + c.axisW.xyz * f.z;
@@ -45,4 +57,6 @@ void main() {
   vFrame = f;
   vCell = int(item.x);
   vCamFrame = cam;
+  vAxis = axis;
+  vSpacing = sliceCount > 1 ? (hi[axis] - lo[axis]) / float(sliceCount - 1) : hi[axis] - lo[axis];
 }
