@@ -86,8 +86,8 @@ const ModeInfo kModes[] = {
      "bakes GDMV (reads the pack's sources) and XMAX; other cells draw exact",
      gdm::kSectionId, bakeGdm, RenderMode::kExact, "exact", "gdm.glsl"},
     {RenderMode::kSlices, "slices",
-     "volumetric texture slices (Meyer & Neyret 1998): --slices N quads per cell across the axis nearest the view, each "
-     "drawn where the height field crosses its slab; needs nothing baked",
+     "volumetric texture slices (Meyer & Neyret 1998): --slices N quads per cell across the axis nearest the view, "
+     "opaque under the height field (forced cells: where gdm's voxels hold a surfel, when baked); needs nothing baked",
      nullptr, nullptr, RenderMode::kSlices, nullptr, nullptr, "slices_vs.glsl", "slices_fs.glsl"},
     {RenderMode::kPoints, "points", "the source points as splats (the baseline; reads the pack's sources)", nullptr, nullptr,
      RenderMode::kPoints, nullptr, nullptr},

@@ -597,6 +597,7 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     const int n = std::clamp(s.slices, 1, kMaxSlices);
     glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceCount"), n);
     glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceAxis"), s.sliceAxis);
+    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "forcedVoxels"), g.gdmEntryBuf ? 1 : 0);
     drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));  // the slices and two far faces
     drawList(vis.inside, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));
   } else {
@@ -727,8 +728,8 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   if (st.drawnMode == RenderMode::kVdm) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.vdmEntryBuf);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.vdmWordBuf);
-  } else if (st.drawnMode == RenderMode::kGdm) {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);
+  } else if (st.drawnMode == RenderMode::kGdm || (st.drawnMode == RenderMode::kSlices && g.gdmEntryBuf)) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);  // slices: forced cells slice gdm's voxels
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
   }
 

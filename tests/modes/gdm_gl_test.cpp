@@ -256,7 +256,7 @@ class GdmGl : public test::GlTest {
       EXPECT_GT(drawn, 100u);
       EXPECT_GE(double(agree), 0.99 * double(drawn)) << name;
     }
-    Score g, par;
+    Score g, par, sl;
     WorkCounters work;
     for (size_t v = 0; v < cams.size(); ++v) {
       const std::vector<float> rd = referenceDepth(ref, cams[v]);
@@ -271,6 +271,11 @@ class GdmGl : public test::GlTest {
       rs.countWork = false;
       rs.mode = RenderMode::kParallax;
       ASSERT_TRUE(r.render(cams[v], rs, fp, kReadDepth | kReadCells).isOk());
+      FrameResult fs;  // slices: forced cells slice the same voxels
+      rs.mode = RenderMode::kSlices;
+      rs.slices = 64;
+      ASSERT_TRUE(r.render(cams[v], rs, fs, kReadDepth | kReadCells).isOk());
+      sl.add(score(p, cams[v], rd, fs, spacing));
       const Score sg = score(p, cams[v], rd, fg, spacing), sp = score(p, cams[v], rd, fp, spacing);
       std::printf("[gdm-gl] %s view %zu: forced pixels gdm IoU %.4f p95 %.2f sp | parallax IoU %.4f p95 %.2f sp\n", name.c_str(), v,
                   sg.iou(), sg.p95(), sp.iou(), sp.p95());
@@ -282,6 +287,8 @@ class GdmGl : public test::GlTest {
                 name.c_str(), forced, g.iou(), g.p95(), par.iou(), par.p95(), (unsigned long long)work.lookups,
                 100.0 * double(work.lookups) / double(std::max<uint64_t>(work.rays, 1)),
                 100.0 * double(work.fallbacks) / double(std::max<uint64_t>(work.lookups, 1)), work.mean());
+    std::printf("[gdm-gl] %s: slices (64) over the same voxels IoU %.4f depth p95 %.2f spacings\n", name.c_str(), sl.iou(), sl.p95());
+    EXPECT_GT(sl.iou(), par.iou()) << name << ": slices of the voxels must cover the forced cells better than parallax";
     EXPECT_GT(work.lookups, 0u) << name;
     EXPECT_LE(work.fallbacks, work.lookups / 5) << name;
     EXPECT_GE(g.iou(), 0.98) << name;
