@@ -152,7 +152,7 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
        << ", \"drawn_mode\": \"" << modeName(points ? RenderMode::kPoints : r.drawn_mode) << "\""
        << ", \"mode_gpu_bytes\": " << renderer.modeGpuBytes(c.settings.mode) << ", \"mode_disk_bytes\": " << ms.bytes
        << ", \"bake_s\": " << ms.bakeSeconds;
-  if (r.work.valid)
+  if (r.work.valid && r.work.rays > 0)  // modes that cast nothing (slices) count nothing
     json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kParallax ? "samples" : "nodes") << "\", \"rays\": " << r.work.rays
          << ", \"lookups\": " << r.work.lookups << ", \"fallbacks\": " << r.work.fallbacks
          << ", \"fast_misses\": " << r.work.fastMisses

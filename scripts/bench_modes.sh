@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The surface-detail modes side by side (docs/BENCHMARKS.md, "Modes"): packs the bunny (10 raw
 # scans) and the dragon (vrip mesh) with the exact mode's maxima, bakes vdm under a byte budget and gdm,
-# then per mode: bytes (section on disk, on the GPU, per texel), bake seconds, frame time
+# then per mode (slices: 16 a cell): bytes (section on disk, on the GPU, per texel), bake seconds, frame time
 # (bench, 8 orbit views), error against the reference (eval) and the work counters.
 # Writes out/modes/*.{json,csv,png,svg} and out/modes/table.md.
 # Usage: scripts/bench_modes.sh [SIZE, default 768] [VDM BUDGET, default 64M]
@@ -9,6 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 size=${1:-768}
 budget=${2:-64M}
+slices=16
 bash scripts/build.sh >/dev/null
 if ! /usr/bin/python3 -c 'import matplotlib' 2>/dev/null; then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
@@ -27,13 +28,13 @@ for m in bunny dragon; do
   $sa bake "$out/$m.hfa" --mode gdm --force -q
   $sa info "$out/$m.hfa" --json > "$out/info_$m.json"
   echo "== bench $m" >&2
-  $sa bench "$out/$m.hfa" --orbit 8 --size "${size}x${size}" --warmup 2 --frames 16 --mode parallax,exact,vdm,gdm \
+  $sa bench "$out/$m.hfa" --orbit 8 --size "${size}x${size}" --warmup 2 --frames 16 --mode parallax,exact,vdm,gdm,slices --slices "$slices" \
       --iterations 12,64 --json > "$out/bench_$m.json"
   echo "== eval $m" >&2
-  $sa eval "$out/$m.hfa" --reference "${ref[$m]}" --orbit 8 --size "${size}x${size}" --repeat 1 --mode parallax,exact,vdm,gdm \
+  $sa eval "$out/$m.hfa" --reference "${ref[$m]}" --orbit 8 --size "${size}x${size}" --repeat 1 --mode parallax,exact,vdm,gdm,slices --slices "$slices" \
       --iterations 12,64 --csv "$out/eval_$m.csv" --plot "$out/tradeoff_$m.png" --json > "$out/eval_$m.json"
 done
-/usr/bin/python3 - "$out" <<'PY' > "$out/table.md"
+/usr/bin/python3 - "$out" "$slices" <<'PY' > "$out/table.md"
 import json, sys
 out = sys.argv[1]
 for m in ("bunny", "dragon"):
@@ -44,7 +45,7 @@ for m in ("bunny", "dragon"):
     modes = {x["mode"]: x for x in info["modes"]}
     print(f"\n{m}: {texels} texels, pack {info['bytes'] / 2**20:.1f} MiB, renderer {bench['renderer']}, "
           f"{bench['cameras']} views at {bench['width']}x{bench['height']}\n")
-    print("| mode | iters | section MiB | B/texel | GPU MiB (mode) | bake s | frame ms | IoU | depth med % | depth p95 % "
+    print("| mode | iters (slices) | section MiB | B/texel | GPU MiB (mode) | bake s | frame ms | IoU | depth med % | depth p95 % "
           "| normal deg | work/ray mean (p99) | lookups falling back |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for c in bench["configs"]:
@@ -57,7 +58,10 @@ for m in ("bunny", "dragon"):
         fb = f"{100 * w['fallbacks'] / w['lookups']:.1f} %" if w.get("lookups") else "-"
         err = (f"{e['iou']:.4f} | {100 * e['depth_median']:.4f} | {100 * e['depth_p95']:.4f} | {e['normal_median_deg']:.2f}"
                if e else "- | - | - | -")
+        work = f"{w['mean']:.1f} ({w['p99']})" if w.get("rays") else "-"  # slices cast nothing: no counters
+        if name == "slices":
+            it = sys.argv[2]
         print(f"| {name} | {it} | {mib:.1f} | {c['mode_disk_bytes'] / texels:.2f} | {c['mode_gpu_bytes'] / 2**20:.1f} | "
-              f"{sec.get('bake_s', 0):.1f} | {c['cpu_ms']['median']:.1f} | {err} | {w.get('mean', 0):.1f} ({w.get('p99', '-')}) | {fb} |")
+              f"{sec.get('bake_s', 0):.1f} | {c['cpu_ms']['median']:.1f} | {err} | {work} | {fb} |")
 PY
 cat "$out/table.md"
