@@ -13,7 +13,7 @@
 #include "atlas/raycast.h"
 #include "modes/exact/exact.h"
 #include "preprocess/pipeline.h"
-#include "../common/test_util.h"
+#include "../common/pack_util.h"
 
 namespace sa {
 namespace {
@@ -121,14 +121,10 @@ struct PackCase {
 class ExactTrace : public ::testing::TestWithParam<PackCase> {};
 
 TEST_P(ExactTrace, PyramidEqualsEveryPatchAndAFineMarch) {
-  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  auto input = InputSet::open({test::sharedData(GetParam().source)});
-  ASSERT_TRUE(input.isOk()) << input.status().message();
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("p.hfa"), PackOptions{}, nullptr, sum).isOk());
   PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("p.hfa")).isOk());
+  const Status packed = test::packShared(dir, GetParam().source, pack);
+  ASSERT_TRUE(packed.isOk()) << packed.message();
   const exact::Pyramids pyr = exact::buildPyramids(pack);
   const CpuRaycaster rc(pack);
   const std::vector<Ray> rays = randomRays(pack, 20000, 7);
@@ -195,14 +191,10 @@ INSTANTIATE_TEST_SUITE_P(RealPacks, ExactTrace,
 // surface sampled at random points of every patch lies within its level-0 codes, and each level's
 // codes are the maximum and minimum of the four below.
 TEST(ExactPyramid, NodesBoundTheSurfaceFromAboveAndBelow) {
-  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  auto input = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
-  ASSERT_TRUE(input.isOk()) << input.status().message();
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("p.hfa"), PackOptions{}, nullptr, sum).isOk());
   PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("p.hfa")).isOk());
+  const Status packed = test::packShared(dir, "stanford_bunny/scans/bun.conf", pack);
+  ASSERT_TRUE(packed.isOk()) << packed.message();
   const exact::Pyramids pyr = exact::buildPyramids(pack);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> unit(0, 1);

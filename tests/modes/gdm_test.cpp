@@ -12,7 +12,7 @@
 
 #include "modes/gdm/gdm.h"
 #include "preprocess/pipeline.h"
-#include "../common/test_util.h"
+#include "../common/pack_util.h"
 
 namespace sa {
 namespace {
@@ -120,14 +120,10 @@ class GdmFunctionOnPacks : public ::testing::TestWithParam<GdmCase> {};
 // The forced cells of real packs are small (a few to a few dozen voxels a side): most rays walk
 // without a lookup; where they look up, the answer must be the walk's.
 TEST_P(GdmFunctionOnPacks, GuidedTraceAgreesWithTheWholeWalk) {
-  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  auto input = InputSet::open({test::sharedData(GetParam().source)});
-  ASSERT_TRUE(input.isOk());
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("p.hfa"), PackOptions{}, nullptr, sum).isOk());
   PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("p.hfa")).isOk());
+  const Status packed = test::packShared(dir, GetParam().source, pack);
+  ASSERT_TRUE(packed.isOk()) << packed.message();
   auto grids = gdm::buildForcedGrids(pack);
   ASSERT_TRUE(grids.isOk()) << grids.status().message();
   std::mt19937 rng(5);

@@ -12,20 +12,16 @@
 #include "modes/exact/exact.h"
 #include "modes/vdm/vdm.h"
 #include "preprocess/pipeline.h"
-#include "../common/test_util.h"
+#include "../common/pack_util.h"
 
 namespace sa {
 namespace {
 
 TEST(Vdm, OffGridLookupsAgainstTheExactTraversalAndTheDepthOnlyToy) {
-  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  auto input = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
-  ASSERT_TRUE(input.isOk());
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("b.hfa"), PackOptions{}, nullptr, sum).isOk());
   PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("b.hfa")).isOk());
+  const Status packed = test::packShared(dir, "stanford_bunny/scans/bun.conf", pack, "b");
+  ASSERT_TRUE(packed.isOk()) << packed.message();
   const exact::Pyramids pyr = exact::buildPyramids(pack);
   // 20 cells with tiles of 16-64 texels a side (most texels of a pack are in such or larger
   // tiles; the bake of a 600-texel tile takes minutes), chosen at random.
@@ -99,14 +95,10 @@ namespace {
 
 // The section keeps to its byte budget and gives back exactly what the bake made.
 TEST(Vdm, SectionKeepsItsBudgetAndRoundTrips) {
-  ASSERT_TRUE(test::haveSharedData()) << "../shared/data is missing";
   test::TempDir dir;
-  auto input = InputSet::open({test::sharedData("stanford_bunny/scans/bun.conf")});
-  ASSERT_TRUE(input.isOk());
-  PackSummary sum;
-  ASSERT_TRUE(packInput(*input, dir.file("b.hfa"), PackOptions{}, nullptr, sum).isOk());
   PackReader pack;
-  ASSERT_TRUE(pack.open(dir.file("b.hfa")).isOk());
+  const Status packed = test::packShared(dir, "stanford_bunny/scans/bun.conf", pack, "b");
+  ASSERT_TRUE(packed.isOk()) << packed.message();
   for (uint64_t budget : {uint64_t(256) << 10, uint64_t(2) << 20}) {
     vdm::Selection sel;
     sel.budget = budget;
