@@ -42,7 +42,7 @@ const char* kHelp =
     "                         samples; the others: pyramid nodes, voxels; vdm, gdm: lookups and\n"
     "                         fallbacks) from one counted pass over the cameras after the timed frames\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
-    "  --slices N             slices mode: quads per cell (default 16)\n"
+    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
     "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"

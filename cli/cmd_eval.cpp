@@ -59,7 +59,7 @@ const char* kHelp =
     "                         else its fallback is drawn and said), slices, points (default\n"
     "                         parallax); one row per mode (per --iterations for parallax)\n"
     "  --iterations LIST      parallax step bounds (default 64)\n"
-    "  --slices N             slices mode: quads per cell (default 16)\n"
+    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
     "                         view; default 3)\n"
     "  --csv FILE             one row per view and configuration plus 'all' summary rows\n"

@@ -120,6 +120,10 @@ void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m
 
 Status slicesFromArgs(const Args& a, RenderSettings& rs) {
   if (!a.has("slices")) return Status::ok();
+  if (a.get("slices") == "auto") {
+    rs.slices = 0;
+    return Status::ok();
+  }
   auto v = parseInt("slices", a.get("slices"), 1, kMaxSlices);
   if (!v) return v.status();
   rs.slices = int(*v);

@@ -566,6 +566,7 @@ Renderer::FrameUniforms Renderer::frameUniforms(const Camera& cam, const RenderS
   }
   f.heightLo = float(hLo);
   f.heightHi = float(hHi);
+  f.pixelAngle = float(cam.fovDeg * M_PI / 180.0 / std::max(cam.height, 1));
   f.light = s.lightDir.normalized().cast<float>();
   f.clipLo = (s.clip.lo - cam.eye).cast<float>();
   f.clipHi = (s.clip.hi - cam.eye).cast<float>();
@@ -594,8 +595,9 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   if (modeInfo(RenderMode(m)).vertexShader) {
     // Slices: every visible cell the same way, whether the camera is inside its box or not.
     glDisable(GL_CULL_FACE);
-    const int n = std::clamp(s.slices, 1, kMaxSlices);
-    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceCount"), n);
+    const int n = s.slices == 0 ? kAutoSlices : std::clamp(s.slices, 1, kMaxSlices);  // quads an instance draws
+    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceCount"), s.slices == 0 ? 0 : n);
+    glProgramUniform1f(g.front[m], glGetUniformLocation(g.front[m], "pixelAngle"), f.pixelAngle);
     glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceAxis"), s.sliceAxis);
     glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "forcedVoxels"), g.gdmEntryBuf ? 1 : 0);
     drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));  // the slices and two far faces

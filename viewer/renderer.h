@@ -29,6 +29,7 @@ struct ClipSettings {
 };
 
 inline constexpr int kMaxSlices = 1024;
+inline constexpr int kAutoSlices = 64;  // slices auto: at most this many a cell (modes/slices/slices_vs.glsl)
 
 struct RenderSettings {
   RenderMode mode = RenderMode::kParallax;
@@ -48,7 +49,7 @@ struct RenderSettings {
   float baseColor[3] = {0.85f, 0.82f, 0.78f};
   CullOptions cull;      // what a frame may skip (all on by default)
   bool countWork = false;  // read the work counters back (FrameStats::work); costs atomics per fragment
-  int slices = 16;         // slices mode: quads per cell (1..kMaxSlices)
+  int slices = 16;         // slices mode: quads per cell (1..kMaxSlices; 0: auto, per cell from its distance)
   int sliceAxis = -1;      // slices mode: -1 the axis nearest the view, per cell; 0, 1, 2: u, v or w always
   // Self-shadowing (001 §3.2): a second cast from each hit toward the light (lightDir; needs
   // headLight off), within the hit's cell, by the mode's own cast (vdm: a lookup).
@@ -132,6 +133,7 @@ class Renderer {
     Eigen::Vector3f fwd, up, light, clipLo, clipHi;
     Eigen::Vector4f plane;
     float heightLo = 0, heightHi = 0;
+    float pixelAngle = 0;  // vertical field of view over the height in pixels (radians)
   };
   void uploadPages(uint64_t budgetBytes);
   Status ensureTargets(int width, int height);

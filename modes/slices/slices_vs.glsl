@@ -3,15 +3,19 @@
 // visible cell a stack of sliceCount quads across its box, from face to face, perpendicular to the
 // frame axis along which they lie closest together on the view's line (004 §4.2: the axis
 // switches per cell, so a grazing view never looks along the slices), ordered front to back so
-// early depth rejection skips the hidden ones. The
-// quads are rasterized (their depth is the slice's, written by the rasterizer); slices_fs.glsl
-// keeps the fragments under the cell's height field.
+// early depth rejection skips the hidden ones. The quads are rasterized (their depth is the
+// slice's, written by the rasterizer); slices_fs.glsl keeps the fragments under the cell's height
+// field. sliceCount 0 (auto, 004 §4.3): per cell the fewest slices, a power of two up to
+// kAutoSlices, that lie no farther apart along the view than a pixel at the cell's distance or a
+// texel, whichever is larger; the instance's other quads collapse to nothing.
 #include "heightfield.glsl"
 
 uniform mat3 viewRotation;  // world -> view rotation (no translation: camera at the origin)
 uniform mat4 projection;    // infinite reverse-Z
-uniform int sliceCount;
+uniform int sliceCount;     // 0: auto
 uniform int sliceAxis;      // -1: per cell against the view; 0, 1, 2: always u, v or w
+uniform float pixelAngle;   // the camera's field of view over its height in pixels (radians)
+const int kAutoSlices = 64; // viewer/renderer.h kAutoSlices
 
 layout(std430, binding = 1) readonly buffer DrawItems { uvec2 items[]; };  // (cell, steps)
 
@@ -33,18 +37,31 @@ void main() {
   // cubes): the largest view component over the box's extent along it.
   vec3 view = abs(0.5 * (lo + hi) - cam) / max(hi - lo, vec3(1e-30));
   int axis = sliceAxis >= 0 ? sliceAxis : (view.x >= view.y && view.x >= view.z ? 0 : (view.y >= view.z ? 1 : 2));
+  int n = sliceCount, drawn = sliceCount;  // this cell's slices; the instance's slice quads
+  if (sliceCount == 0) {
+    vec3 toBox = 0.5 * (lo + hi) - cam;
+    float texel = min((hi.x - lo.x) / c.boxW.z, (hi.y - lo.y) / c.boxW.w);
+    float along = max(length(toBox) * pixelAngle, texel) * max(abs(toBox[axis]) / max(length(toBox), 1e-30), 1e-3);
+    n = 2;
+    while (n < kAutoSlices && (hi[axis] - lo[axis]) / float(n - 1) > along) n *= 2;
+    drawn = kAutoSlices;
+  }
   int s = gl_VertexID / 6, corner = kQuad[gl_VertexID % 6];
   int across = axis;
   float at;
-  if (s < sliceCount) {
-    if (cam[axis] > 0.5 * (lo[axis] + hi[axis])) s = sliceCount - 1 - s;  // front to back
+  if (s >= n && s < drawn) {  // auto: more quads than this cell needs
+    gl_Position = vec4(0.0, 0.0, 0.0, 1.0);
+    return;
+  }
+  if (s < n) {
+    if (cam[axis] > 0.5 * (lo[axis] + hi[axis])) s = n - 1 - s;  // front to back
     // From face to face: a ray that enters the solid meets a slice before it leaves the box
     // through the slicing axis' faces...
-    at = sliceCount > 1 ? mix(lo[axis], hi[axis], float(s) / float(sliceCount - 1)) : 0.5 * (lo[axis] + hi[axis]);
+    at = n > 1 ? mix(lo[axis], hi[axis], float(s) / float(n - 1)) : 0.5 * (lo[axis] + hi[axis]);
   } else {
     // ...and the box's two far faces across the other axes close the last slab where a ray
     // leaves through them.
-    across = (axis + 1 + s - sliceCount) % 3;
+    across = (axis + 1 + s - drawn) % 3;
     at = cam[across] < 0.5 * (lo[across] + hi[across]) ? hi[across] : lo[across];
   }
   int a1 = (across + 1) % 3, a2 = (across + 2) % 3;
@@ -58,5 +75,5 @@ void main() {
   vCell = int(item.x);
   vCamFrame = cam;
   vAxis = axis;
-  vSpacing = sliceCount > 1 ? (hi[axis] - lo[axis]) / float(sliceCount - 1) : hi[axis] - lo[axis];
+  vSpacing = n > 1 ? (hi[axis] - lo[axis]) / float(n - 1) : hi[axis] - lo[axis];
 }

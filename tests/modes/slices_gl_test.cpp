@@ -160,5 +160,30 @@ TEST_F(SlicesGl, AxisSwitchingKeepsAGrazingViewClose) {
   EXPECT_GT(w.p99Err, 1.3 * s.p99Err);  // measured 0.112 against 0.071
 }
 
+// --slices auto: near, the slices lie within a pixel (or a texel) of each other along the view,
+// so depth and coverage hold; far, a cell gets few of them and the frame far fewer fragments.
+TEST_F(SlicesGl, AutoCountFollowsTheDistance) {
+  Camera near = view(60), far = near;
+  far.eye = far.target + 8.0 * (near.eye - near.target);
+  const std::vector<float> ref = test::cpuDepth(pack_, near);
+  RenderSettings ps;
+  ps.iterations = 12;
+  ps.cull.subpixelSplats = false;
+  FrameResult pf;
+  ASSERT_TRUE(r_.render(near, ps, pf, kReadDepth).isOk());
+  const FrameResult autoNear = render(near, 0);
+  const double pixel = (near.eye - near.target).norm() * near.fovDeg * M_PI / 180 / near.height;
+  const double bound = std::sqrt(3.0) * std::max(pixel, texel()) + 0.5 * texel();
+  const test::Agreement a = test::agreement(autoNear.depth, ref, bound);
+  const FrameResult autoFar = render(far, 0), fixedFar = render(far, 64);
+  std::printf("[slices-gl] auto, near: IoU %.4f (parallax-12 %.4f), depth p99 %.5f (bound %.5f: a pixel %.5f, a texel %.5f); "
+              "far (8x): %llu fragments against %llu with 64 slices\n",
+              iou(autoNear.depth, ref), iou(pf.depth, ref), a.p99Err, bound, pixel, texel(),
+              (unsigned long long)autoFar.stats.fragments, (unsigned long long)fixedFar.stats.fragments);
+  EXPECT_GE(iou(autoNear.depth, ref), iou(pf.depth, ref) - 0.005);
+  EXPECT_LE(a.p99Err, bound);
+  EXPECT_LT(4 * autoFar.stats.fragments, fixedFar.stats.fragments);
+}
+
 }  // namespace
 }  // namespace sa
