@@ -14,7 +14,7 @@ export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 alloc=max_allocation_size_mb=2048:allocator_may_return_null=1
 # Tests that create a GL context (directly or through the scanatlas binary; FarReal is
 # parameterized, so its names start with the instantiation).
-gl='^(RenderTest|Accuracy|Stress|ExactGl|VdmGl|GdmGl|Cli|Window)\.|/FarReal\.'
+gl='^(RenderTest|Accuracy|Stress|ExactGl|VdmGl|GdmGl|SlicesGl|Cli|Window)\.|/FarReal\.'
 ASAN_OPTIONS=detect_leaks=1:$alloc ctest --output-on-failure -j"${JOBS:-2}" -E "$gl|Vdm\.OffGrid"
 # The dragon's 33 views at 1024x1024, Igea's 20 at 768x768 and the vdm bakes of the VdmGl and
 # Vdm.OffGrid tests (256 exact rays a texel) measure accuracy, not memory safety (meshes are
