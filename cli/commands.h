@@ -14,6 +14,7 @@ int cmdView(int argc, char** argv);
 int cmdVerify(int argc, char** argv);
 int cmdConvert(int argc, char** argv);
 int cmdBake(int argc, char** argv);
+int cmdGrooves(int argc, char** argv);
 int reportError(const Status& s);
 std::string jsonEscape(const std::string& s);
 }  // namespace sa

@@ -25,6 +25,7 @@ const char* kUsage =
     "          (format, points, attributes, bounds)\n"
     "  verify  check a pack completely: checksums, tile layout, gutters, frames, counts\n"
     "  bake    add what a surface-detail mode needs (e.g. --mode exact) to an existing pack\n"
+    "  grooves find cracks and joints in a scan's points; export them as JSON / CSV\n"
     "  bench   frame times over a camera path, per mode and setting (GPU and CPU time, boxes, fragments)\n"
     "  eval    image error against a reference mesh or scan set, with frame times; trade-off plot\n"
     "\n"
@@ -86,6 +87,7 @@ int main(int argc, char** argv) {
   if (cmd == "bench") fn = sa::cmdBench;
   if (cmd == "eval") fn = sa::cmdEval;
   if (cmd == "bake") fn = sa::cmdBake;
+  if (cmd == "grooves") fn = sa::cmdGrooves;
   if (fn) {
     // Last line of defence: an exception escaping a library is an internal failure with a
     // message, never an abort. (Outputs are temporaries until committed, so nothing
