@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <sstream>
 
 namespace sa {
 namespace {
@@ -311,6 +312,17 @@ Status rewritePackWithSections(const PackReader& in, const std::string& out, con
 std::string PackReader::note() const {
   const SectionEntry* n = find("NOTE");
   return n ? std::string(reinterpret_cast<const char*>(base_ + n->offset), n->size) : std::string();
+}
+
+std::vector<std::string> packSources(const PackReader& pack, std::string& columns) {
+  std::vector<std::string> out;
+  std::istringstream in(pack.note());
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("source: ", 0) == 0) out.push_back(line.substr(8));
+    if (line.rfind("columns: ", 0) == 0) columns = line.substr(9);
+  }
+  return out;
 }
 
 }  // namespace sa

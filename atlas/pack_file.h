@@ -118,4 +118,8 @@ class PackReader {
   const uint8_t* nrml_ = nullptr;
 };
 
+// The source files the pack was made from (its NOTE's "source:" lines) and the --columns spec of
+// text inputs ("columns:"), for bakes and commands that go back to the raw points.
+std::vector<std::string> packSources(const PackReader& pack, std::string& columns);
+
 }  // namespace sa

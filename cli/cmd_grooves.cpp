@@ -1,7 +1,9 @@
 // `scanatlas grooves`: detect cracks and joints in a scan's raw points and export them.
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 
+#include "atlas/pack_file.h"
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "common/fileio.h"
@@ -12,7 +14,8 @@ namespace sa {
 namespace {
 
 constexpr const char* kHelp =
-    "usage: scanatlas grooves INPUT... [--json FILE] [--csv FILE] [options]\n\n"
+    "usage: scanatlas grooves INPUT... [--json FILE] [--csv FILE] [options]\n"
+    "       scanatlas grooves PACK.hfa [...]   (the files the pack was made from)\n\n"
     "Finds grooves (cracks, joints, engraved lines) in the input's raw points: in regions of\n"
     "--region spacings, each over its own plane, the residual against a robust low-pass, valleys\n"
     "of its Hessian at 0.75-4 spacings (strength measured against the region's own noise),\n"
@@ -30,7 +33,8 @@ constexpr const char* kHelp =
     "  --threshold T        valley strength over the noise that starts a line (default 5)\n"
     "  --low-threshold T    ... that continues one (default 3)\n"
     "  --region R           region side in spacings (default 64)\n"
-    "  --no-gaps            do not report uncovered strips\n"
+    "  --no-gaps            do not report uncovered strips (always off for a mesh: its triangles\n"
+    "                       cover the strips between its vertices)\n"
     "  --quiet              no progress\n";
 
 struct PointSink : BatchSink {
@@ -79,6 +83,22 @@ void printSummary(const GrooveSet& set, double seconds) {
   if (show < set.grooves.size()) std::printf("  ... %zu more in the files\n", set.grooves.size() - show);
 }
 
+// A pack names the files it was made from: grooves are found in their raw points.
+Status packInputs(std::vector<std::string>& inputs, std::string& columns) {
+  if (inputs.size() != 1 || lowerExtension(inputs[0]) != ".hfa") return Status::ok();
+  PackReader pack;
+  SA_RETURN_IF_ERROR(pack.open(inputs[0]));
+  std::vector<std::string> sources = packSources(pack, columns);
+  if (sources.empty()) return Status::badInput(inputs[0] + ": the pack names no source files; grooves are found in the raw points");
+  for (const std::string& f : sources)
+    if (!std::filesystem::exists(f))
+      return Status::badInput(inputs[0] + ": source file " + f + " is gone; grooves are found in the raw points");
+  std::fprintf(stderr, "grooves: %s: reading its %zu source file%s\n", inputs[0].c_str(), sources.size(),
+               sources.size() == 1 ? "" : "s");
+  inputs = std::move(sources);
+  return Status::ok();
+}
+
 }  // namespace
 
 int cmdGrooves(int argc, char** argv) {
@@ -96,11 +116,17 @@ int cmdGrooves(int argc, char** argv) {
   GrooveOptions opt;
   s = readOptions(a, opt);
   if (!s) return reportError(s);
-  Result<InputSet> input = InputSet::open(a.positionals());
+  std::vector<std::string> inputs = a.positionals();
+  std::string columns;
+  s = packInputs(inputs, columns);
+  if (!s) return reportError(s);
+  Result<InputSet> input = InputSet::open(inputs, columns);
   if (!input) return reportError(input.status());
+  std::vector<std::string> reads = input->allPaths();
+  reads.insert(reads.end(), a.positionals().begin(), a.positionals().end());
   for (const char* out : {"json", "csv"})
     if (a.has(out)) {
-      s = checkNotAnInput(a.get(out), input->allPaths(), std::string("--") + out);
+      s = checkNotAnInput(a.get(out), reads, std::string("--") + out);
       if (!s) return reportError(s);
     }
   const auto t0 = std::chrono::steady_clock::now();
@@ -108,6 +134,12 @@ int cmdGrooves(int argc, char** argv) {
   s = input->stream(sink, false);
   if (!s) return reportError(s);
   if (sink.pos.size() < 3 * 64) return reportError(Status::badInput("grooves: the input holds fewer than 64 points"));
+  // A mesh's triangles cover the strips between its vertices: no strip is a hole in the data.
+  if (input->hasTriangles() && opt.gaps) {
+    opt.gaps = false;
+    std::fprintf(stderr, "grooves: %s is a mesh: uncovered strips are not reported (its triangles cover them)\n",
+                 input->files()[0].path.c_str());
+  }
   const bool quiet = a.flag("quiet");
   if (!quiet)
     opt.progress = [](uint64_t d, uint64_t t) {

@@ -91,7 +91,7 @@ Img robustLowPass(const Img& S, const Img& covered, double sigma) {
     for (size_t i = 0; i < S.a.size(); ++i)
       if (covered.a[i] > 0) r.push_back(S.a[i] - L.a[i]);
     const float sd = robustStd(r);
-    for (size_t i = 0; i < S.a.size(); ++i) mask.a[i] = covered.a[i] > 0 && S.a[i] - L.a[i] > -2.5f * sd ? 1.f : 0.f;
+    for (size_t i = 0; i < S.a.size(); ++i) mask.a[i] = covered.a[i] > 0 && std::fabs(S.a[i] - L.a[i]) < 2.5f * sd ? 1.f : 0.f;
     L = twiced(S, mask, sigma);
   }
   return L;
@@ -397,6 +397,25 @@ bool stripLine(const std::vector<int>& members, int w, std::vector<Eigen::Vector
   return line.size() >= 2 && lengthPx >= 4 * widthPx;
 }
 
+// A crack's strip has dense data on both sides: at 2-8 pixels beside its edges at least 90 %
+// of the pixels are covered. Sparse or unevenly sampled areas (scan lines, mesh vertices of
+// varying density) are full of small holes there.
+bool denseBeside(const Img& covered, const std::vector<Eigen::Vector2d>& line, double widthPx) {
+  size_t hit = 0, total = 0;
+  for (size_t k = 0; k + 1 < line.size(); ++k) {
+    const Eigen::Vector2d t = (line[k + 1] - line[k]).normalized(), n(-t.y(), t.x());
+    for (int side : {-1, 1})
+      for (int o = 2; o <= 8; ++o) {
+        const Eigen::Vector2d q = line[k] + n * (side * (widthPx / 2 + o));
+        const int x = int(std::lround(q.x())), y = int(std::lround(q.y()));
+        if (x < 0 || y < 0 || x >= covered.w || y >= covered.h) continue;
+        ++total;
+        hit += covered.at(x, y) > 0;
+      }
+  }
+  return total > 0 && hit * 10 >= total * 9;
+}
+
 // Thin, elongated uncovered strips (a deep crack returns no points).
 std::vector<std::vector<Eigen::Vector2d>> gapLines(const Img& covered, const Grid& g, double s, const GrooveOptions& opt,
                                                    std::vector<double>& widths) {
@@ -420,6 +439,7 @@ std::vector<std::vector<Eigen::Vector2d>> gapLines(const Img& covered, const Gri
     std::vector<Eigen::Vector2d> px;
     double widthPx = 0, lengthPx = 0;
     if (!stripLine(members, g.w, px, widthPx, lengthPx)) continue;
+    if (widthPx < 2 || !denseBeside(covered, px, widthPx)) continue;
     // No point lies within a spacing of the strip, and the points beside a crack lie on average
     // a quarter spacing from its edge: the crack is about 0.75 spacing wider than the strip
     // (measured on jittered-grid scans of 2.5-5 spacing cracks).

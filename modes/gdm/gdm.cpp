@@ -426,16 +426,6 @@ class Collect : public BatchSink {
   double o_[3];
 };
 
-std::vector<std::string> sourcesOf(const PackReader& pack, std::string& columns) {
-  std::vector<std::string> out;
-  std::istringstream in(pack.note());
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("source: ", 0) == 0) out.push_back(line.substr(8));
-    if (line.rfind("columns: ", 0) == 0) columns = line.substr(9);
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -447,7 +437,7 @@ Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, const std
   std::vector<CellGrid> grids(forced.size());
   if (forced.empty()) return grids;
   std::string columns;
-  const auto sources = sourcesOf(pack, columns);
+  const auto sources = packSources(pack, columns);
   if (sources.empty()) return Status::badInput(pack.path() + ": the pack names no source files (NOTE); gdm builds from them");
   for (const auto& s : sources)
     if (!std::filesystem::exists(s))

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "../common/test_util.h"
+#include "grooves/grooves.h"
 
 namespace sa {
 namespace {
@@ -398,6 +399,52 @@ std::string bytesOf(const std::string& path) {
 
 // A command whose output is one of its inputs (the same file, through a symbolic or a hard link
 // too) refuses with exit 2 and changes nothing; image outputs are PNG or JPEG by extension.
+// `scanatlas grooves` on a generated scan with known grooves: JSON and CSV written, the grooves
+// there, and clear errors for bad options.
+TEST(Cli, GroovesExportJsonAndCsv) {
+  test::TempDir d;
+  const SyntheticScan scan = makeGrooveScan(200, 1, 0.1, acceptanceGrooves(200, 1, 0.1), 3);
+  {
+    std::ofstream o(d.file("wall.ply"), std::ios::binary);
+    o << "ply\nformat binary_little_endian 1.0\nelement vertex " << scan.pos.size() / 3
+      << "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+    o.write(reinterpret_cast<const char*>(scan.pos.data()), std::streamsize(scan.pos.size() * sizeof(double)));
+  }
+  const std::string in = d.file("wall.ply");
+  CmdResult r = run("grooves " + in + " --json " + d.file("g.json") + " --csv " + d.file("g.csv") + " --quiet");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("grooves,"), std::string::npos) << r.out;
+  std::ifstream jf(d.file("g.json"));
+  const nlohmann::json j = nlohmann::json::parse(jf);
+  EXPECT_EQ(j["format"], "scanatlas-grooves");
+  ASSERT_GE(j["grooves"].size(), 8u);  // half-size plane: the ten grooves, the shallowest may be missed
+  for (const auto& g : j["grooves"]) {
+    EXPECT_GE(g["polyline"].size(), 2u);
+    EXPECT_GT(g["width"].get<double>(), 0);
+    EXPECT_EQ(g["width_uncertainty"].get<double>(), j["spacing"].get<double>());
+  }
+  std::ifstream cf(d.file("g.csv"));
+  std::string header;
+  std::getline(cf, header);
+  EXPECT_EQ(header, "id,shape,width,width_uncertainty,depth,length,confidence,points,polyline");
+  size_t rows = 0;
+  for (std::string line; std::getline(cf, line);) ++rows;
+  EXPECT_EQ(rows, j["grooves"].size());
+  // On a pack: the same grooves, from the file it was made from.
+  ASSERT_EQ(run("pack " + in + " -o " + d.file("wall.hfa")).code, 0);
+  ASSERT_EQ(run("grooves " + d.file("wall.hfa") + " --json " + d.file("p.json") + " --quiet").code, 0);
+  std::ifstream pf(d.file("p.json"));
+  EXPECT_EQ(nlohmann::json::parse(pf)["grooves"].size(), j["grooves"].size());
+  EXPECT_EQ(run("grooves --help").code, 0);
+  EXPECT_EQ(run("grooves").code, 2);
+  EXPECT_EQ(run("grooves " + d.file("missing.ply")).code, 2);
+  EXPECT_EQ(run("grooves " + in + " --min-width 9 --max-width 8").code, 2);
+  EXPECT_EQ(run("grooves " + in + " --threshold -1").code, 2);
+  const CmdResult same = runErr("grooves " + in + " --json " + in, d.file("err.txt"));
+  EXPECT_EQ(same.code, 2);
+  EXPECT_NE(same.err.find("--json"), std::string::npos) << same.err;
+}
+
 TEST(Cli, OutputsNeverOverwriteInputs) {
   test::TempDir d;
   const std::string scan = d.file("scan.ply");
