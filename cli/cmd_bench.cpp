@@ -34,7 +34,7 @@ const char* kHelp =
     "  --fov DEG, --up X,Y,Z  for --orbit (defaults 40 and the pack's up axis)\n"
     "  --warmup N             frames rendered before timing each configuration (default 10)\n"
     "  --frames N             timed frames per configuration (default 200)\n"
-    "  --mode LIST            parallax, exact, vdm, gdm, slices, points (default parallax). exact, vdm\n"
+    "  --mode LIST            parallax, exact, vdm, gdm, slices, auto, points (default parallax). exact, vdm\n"
     "                         and gdm need their section ('scanatlas bake PACK --mode M'); without\n"
     "                         it the mode's fallback is drawn and said. points: the source points\n"
     "                         as splats (reads the pack's source files). Per mode: its bytes on the\n"
@@ -42,8 +42,11 @@ const char* kHelp =
     "                         samples; the others: pyramid nodes, voxels; vdm, gdm: lookups and\n"
     "                         fallbacks) from one counted pass over the cameras after the timed frames\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
-    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"
-    "  --compare-skips        also run parallax with each skip turned off, one at a time\n"
+    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
+    "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
+    "                         the parallax march (default 8)\n"
+    "  --compare-skips        also run parallax with each skip turned off, one at a time, and the\n"
+    "                         auto mode (small boxes as slices) to show what that switch saves\n"
     "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
     "                         turn a skip off for every configuration\n"
@@ -86,7 +89,7 @@ std::string summaryJson(const Summary& s) {
 struct Row {
   Config config;
   Summary gpu, cpu;
-  double drawn = 0, culled = 0, splats = 0, frags = 0, submitted = 0;
+  double drawn = 0, culled = 0, splats = 0, sliced = 0, frags = 0, submitted = 0;
   bool invocations = false;
   WorkCounters work;  // one counted frame per camera, after the timed ones (atomics cost time)
   RenderMode drawn_mode = RenderMode::kParallax;
@@ -111,6 +114,7 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
     row.drawn += st.drawn;
     row.culled += st.culled;
     row.splats += st.splats;
+    row.sliced += st.sliced;
     row.frags += double(st.fragments);
     row.submitted += st.submitted;
     csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f << ","
@@ -121,6 +125,7 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
   row.drawn /= n;
   row.culled /= n;
   row.splats /= n;
+  row.sliced /= n;
   row.frags /= n;
   row.submitted /= n;
   row.gpu = summarize(gpu);
@@ -146,7 +151,7 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
   json << "{\"mode\": \"" << modeName(c.settings.mode) << "\", \"iterations\": " << (points ? 0 : c.settings.iterations)
        << ", \"skips\": \"" << c.skips << "\", \"gpu_ms\": " << summaryJson(r.gpu) << ", \"cpu_ms\": " << summaryJson(r.cpu)
        << ", \"fps\": " << 1000.0 / std::max(r.cpu.median, 1e-9) << ", \"boxes_submitted\": " << r.submitted
-       << ", \"boxes_culled\": " << r.culled << ", \"boxes_drawn\": " << r.drawn << ", \"splats\": " << r.splats
+       << ", \"boxes_culled\": " << r.culled << ", \"boxes_drawn\": " << r.drawn << ", \"splats\": " << r.splats << ", \"sliced\": " << r.sliced
        << ", \"fragments\": " << r.frags << ", \"fragments_are_invocations\": " << (r.invocations ? "true" : "false")
        << ", \"atlas_bytes\": " << renderer.gpuBytes() << ", \"point_bytes\": " << (points ? renderer.pointBytes() : 0)
        << ", \"drawn_mode\": \"" << modeName(points ? RenderMode::kPoints : r.drawn_mode) << "\""
@@ -186,7 +191,7 @@ void printTable(const std::vector<Row>& rows, const std::string& renderer) {
 int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "csv"},
+                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "csv"},
                      {"compare-skips", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
@@ -257,6 +262,11 @@ int cmdBench(int argc, char** argv) {
     off("none", [](CullOptions& o) {
       o.frustum = o.backfaceCull = o.adaptiveSteps = o.subpixelSplats = o.frontToBack = false;
     });
+    // What the level-of-detail switch saves: parallax with boxes under --auto-pixels as slices.
+    Config lod{base, "all+auto-slices"};
+    lod.settings.mode = RenderMode::kAuto;
+    lod.settings.iterations = it;
+    configs.push_back(lod);
   }
 
   EglContext ctx;

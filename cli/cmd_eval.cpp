@@ -56,10 +56,12 @@ const char* kHelp =
     "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render (up\n"
     "                         defaults to the pack's up axis)\n"
     "  --mode LIST            parallax, exact, vdm, gdm (each needs 'scanatlas bake PACK --mode M',\n"
-    "                         else its fallback is drawn and said), slices, points (default\n"
+    "                         else its fallback is drawn and said), slices, auto, points (default\n"
     "                         parallax); one row per mode (per --iterations for parallax)\n"
     "  --iterations LIST      parallax step bounds (default 64)\n"
-    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"
+    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
+    "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
+    "                         the parallax march (default 8)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
     "                         view; default 3)\n"
     "  --csv FILE             one row per view and configuration plus 'all' summary rows\n"
@@ -465,7 +467,7 @@ int runEval(const Args& a) {
 int cmdEval(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "repeat",
+                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "auto-pixels", "repeat",
                       "csv", "plot"},
                      {"far", "json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {

@@ -39,11 +39,14 @@ const char* kHelp =
     "                         traversal with the exact root; needs 'scanatlas bake PACK --mode exact'),\n"
     "                         vdm (view-dependent displacement lookups; needs 'scanatlas bake PACK\n"
     "                         --mode vdm'), gdm, slices (volumetric slices: --slices quads per cell,\n"
-    "                         needs nothing baked); a mode the pack lacks draws its fallback and says so\n"
+    "                         needs nothing baked), auto (parallax near, slices far: --auto-pixels);\n"
+    "                         a mode the pack lacks draws its fallback and says so\n"
     "  --slices N|auto        slices mode: quads per cell across the axis nearest the view (default 16);\n"
     "                         auto: per cell the fewest (a power of two, at most 64) that lie no farther\n"
     "                         apart along the view than a pixel at the cell's distance or a texel\n"
-    "  --iterations N         linear ray-march steps per height field (default 64)\n"
+    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
+    "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
+    "                         the parallax march (default 8)\n"    "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-color             ignore scan colours\n"
     "  --shading MODE         lambert (head light, default), normals, height (colour ramp along --up),\n"
@@ -168,7 +171,7 @@ Status outputsFromArgs(const Args& a, size_t views, Outputs& out) {
 int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "refine",
+                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "auto-pixels", "refine",
                       "background", "shading", "clip-box", "section", "mode", "light"},
                      {"edl", "shadows", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});

@@ -119,6 +119,12 @@ void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m
 }
 
 Status slicesFromArgs(const Args& a, RenderSettings& rs) {
+  if (a.has("auto-pixels")) {
+    auto v = parseNumber("auto-pixels", a.get("auto-pixels"));
+    if (!v) return v.status();
+    if (!(*v >= 1 && *v <= 4096)) return Status::badInput("--auto-pixels must be between 1 and 4096");
+    rs.autoPixels = *v;
+  }
   if (!a.has("slices")) return Status::ok();
   if (a.get("slices") == "auto") {
     rs.slices = 0;

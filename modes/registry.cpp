@@ -89,6 +89,11 @@ const ModeInfo kModes[] = {
      "volumetric texture slices (Meyer & Neyret 1998): --slices N quads per cell across the axis nearest the view, "
      "opaque under the height field (forced cells: where gdm's voxels hold a surfel, when baked); needs nothing baked",
      nullptr, nullptr, RenderMode::kSlices, nullptr, nullptr, "slices_vs.glsl", "slices_fs.glsl"},
+    {RenderMode::kAuto, "auto",
+     "level of detail: per cell the parallax march where its box covers --auto-pixels pixels or more (default 8), "
+     "slices where it covers fewer, as many as keep them a pixel apart along the view (depth error <= sqrt(3) pixel "
+     "footprints, 004 §4.1); needs nothing baked",
+     nullptr, nullptr, RenderMode::kAuto, nullptr, "parallax_cast.glsl"},
     {RenderMode::kPoints, "points", "the source points as splats (the baseline; reads the pack's sources)", nullptr, nullptr,
      RenderMode::kPoints, nullptr, nullptr},
 };

@@ -14,8 +14,8 @@
 
 namespace sa {
 
-enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4, kSlices = 5 };
-inline constexpr int kRenderModes = 6;
+enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4, kSlices = 5, kAuto = 6 };
+inline constexpr int kRenderModes = 7;
 
 // What a bake may be limited to (modes that bake per cell: vdm) and how it reports progress.
 struct BakeRequest {

@@ -28,6 +28,7 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
   out.front.clear();
   out.inside.clear();
   out.splats.clear();
+  out.sliced.clear();
   out.submitted = static_cast<uint32_t>(bounds_.size());
   out.culled = 0;
   const Eigen::Vector3d f = cam.forward(), r = cam.right(), u = cam.trueUp();
@@ -82,6 +83,8 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
     if (opt.frontToBack) depthOf[i] = z;
     if (!inside && opt.subpixelSplats && px < opt.splatPixels) {
       out.splats.push_back(item);
+    } else if (!inside && px < opt.slicePixels) {
+      out.sliced.push_back(item);
     } else if (inside || !opt.backfaceCull) {
       out.inside.push_back(item);
     } else {
@@ -92,6 +95,7 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
     auto byDepth = [&](const DrawItem& a, const DrawItem& b) { return depthOf[a.cell] < depthOf[b.cell]; };
     std::sort(out.front.begin(), out.front.end(), byDepth);
     std::sort(out.inside.begin(), out.inside.end(), byDepth);
+    std::sort(out.sliced.begin(), out.sliced.end(), byDepth);
   }
 }
 

@@ -29,6 +29,8 @@ struct CullOptions {
   int maxSteps = kDefaultIterations;
   int minSteps = 4;
   double splatPixels = 1.0;
+  // --mode auto: boxes whose projected diameter is under this many pixels go to `sliced` (0: none).
+  double slicePixels = 0;
   // Clip box and section plane (relative to the pack origin): boxes wholly outside are culled.
   bool clipBox = false;
   Eigen::Vector3d clipLo = Eigen::Vector3d::Zero(), clipHi = Eigen::Vector3d::Zero();
@@ -49,6 +51,7 @@ struct VisibleSet {
   std::vector<DrawItem> front;   // camera outside the box: rasterize front faces
   std::vector<DrawItem> inside;  // camera inside (or touching) the box: back faces
   std::vector<DrawItem> splats;  // sub-pixel boxes
+  std::vector<DrawItem> sliced;  // --mode auto: boxes under CullOptions::slicePixels, drawn as slices
   uint32_t submitted = 0, culled = 0;
 };
 

@@ -496,20 +496,22 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   co.maxSteps = std::max(1, s.iterations);
   co.pageResident = pagesPending() ? g.resident.data() : nullptr;
   co.minSteps = std::min(co.minSteps, co.maxSteps);
+  co.slicePixels = s.mode == RenderMode::kAuto ? s.autoPixels : 0;
   culler_->compute(cam, camRel, np, co, vis);
   st.submitted = vis.submitted;
   st.culled = vis.culled;
   st.drawn = static_cast<uint32_t>(vis.front.size() + vis.inside.size());
   st.inside = static_cast<uint32_t>(vis.inside.size());
   st.splats = static_cast<uint32_t>(vis.splats.size());
+  st.sliced = static_cast<uint32_t>(vis.sliced.size());
   size_t bytes = 0;
-  for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+  for (const auto* list : {&vis.front, &vis.inside, &vis.splats, &vis.sliced}) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
   if (GLsizeiptr(bytes) > g.itemCapacity) {
     g.itemCapacity = GLsizeiptr(std::max<size_t>(bytes, 4096));
     glNamedBufferData(g.itemBuf, g.itemCapacity, nullptr, GL_STREAM_DRAW);
   }
   size_t off = 0;
-  for (const auto* list : {&vis.front, &vis.inside, &vis.splats}) {
+  for (const auto* list : {&vis.front, &vis.inside, &vis.splats, &vis.sliced}) {
     if (!list->empty()) glNamedBufferSubData(g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)), list->data());
     off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
   }
@@ -592,22 +594,33 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
   };
   const int m = int(drawnMode(s.mode));
-  if (modeInfo(RenderMode(m)).vertexShader) {
-    // Slices: every visible cell the same way, whether the camera is inside its box or not.
+  // Slices: every listed cell the same way, whether the camera is inside its box or not;
+  // count 0: per cell from its distance, at most autoMax.
+  auto drawSlices = [&](const std::vector<DrawItem>& list, int count, int autoMax) {
+    const GLuint p = g.front[int(RenderMode::kSlices)];
     glDisable(GL_CULL_FACE);
-    const int n = s.slices == 0 ? kAutoSlices : std::clamp(s.slices, 1, kMaxSlices);  // quads an instance draws
-    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceCount"), s.slices == 0 ? 0 : n);
-    glProgramUniform1f(g.front[m], glGetUniformLocation(g.front[m], "pixelAngle"), f.pixelAngle);
-    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "sliceAxis"), s.sliceAxis);
-    glProgramUniform1i(g.front[m], glGetUniformLocation(g.front[m], "forcedVoxels"), g.gdmEntryBuf ? 1 : 0);
-    drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));  // the slices and two far faces
-    drawList(vis.inside, g.front[m], GL_BACK, GL_TRIANGLES, 6 * (n + 2));
+    const int n = count == 0 ? autoMax : std::clamp(count, 1, kMaxSlices);  // quads an instance draws
+    glProgramUniform1i(p, glGetUniformLocation(p, "sliceCount"), count == 0 ? 0 : n);
+    glProgramUniform1i(p, glGetUniformLocation(p, "autoSlices"), autoMax);
+    glProgramUniform1f(p, glGetUniformLocation(p, "pixelAngle"), f.pixelAngle);
+    glProgramUniform1i(p, glGetUniformLocation(p, "sliceAxis"), s.sliceAxis);
+    glProgramUniform1i(p, glGetUniformLocation(p, "forcedVoxels"), g.gdmEntryBuf ? 1 : 0);
+    drawList(list, p, GL_BACK, GL_TRIANGLES, 6 * (n + 2));  // the slices and two far faces
+  };
+  if (RenderMode(m) == RenderMode::kSlices) {
+    drawSlices(vis.front, s.slices, kAutoSlices);
+    drawSlices(vis.inside, s.slices, kAutoSlices);
   } else {
     drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
     drawList(vis.inside, g.inside[m], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
   }
   glDisable(GL_CULL_FACE);
   drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
+  // auto: the small boxes as slices, enough of them for a pixel along the view.
+  int autoMax = 2;
+  while (autoMax < kAutoSlices && autoMax < s.autoPixels) autoMax *= 2;
+  drawSlices(vis.sliced, 0, autoMax);
+  glDisable(GL_CULL_FACE);
   if (!s.showBoxes) return;
   // The decomposition view: every drawn box's edges, depth-tested against the surface.
   off = 0;
@@ -730,7 +743,8 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   if (st.drawnMode == RenderMode::kVdm) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.vdmEntryBuf);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.vdmWordBuf);
-  } else if (st.drawnMode == RenderMode::kGdm || (st.drawnMode == RenderMode::kSlices && g.gdmEntryBuf)) {
+  } else if (st.drawnMode == RenderMode::kGdm ||
+             ((st.drawnMode == RenderMode::kSlices || st.drawnMode == RenderMode::kAuto) && g.gdmEntryBuf)) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);  // slices: forced cells slice gdm's voxels
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
   }

@@ -51,6 +51,9 @@ struct RenderSettings {
   bool countWork = false;  // read the work counters back (FrameStats::work); costs atomics per fragment
   int slices = 16;         // slices mode: quads per cell (1..kMaxSlices; 0: auto, per cell from its distance)
   int sliceAxis = -1;      // slices mode: -1 the axis nearest the view, per cell; 0, 1, 2: u, v or w always
+  // auto mode: boxes whose projected diameter is under this many pixels are drawn as slices
+  // (auto count, at most the next power of two of it), the others by the parallax march.
+  double autoPixels = 8;
   // Self-shadowing (001 §3.2): a second cast from each hit toward the light (lightDir; needs
   // headLight off), within the hit's cell, by the mode's own cast (vdm: a lookup).
   bool shadows = false;
@@ -74,6 +77,7 @@ struct WorkCounters {
 
 struct FrameStats {
   uint32_t submitted = 0, culled = 0, drawn = 0, inside = 0, splats = 0;
+  uint32_t sliced = 0;         // auto mode: boxes drawn as slices
   uint64_t points = 0;         // points mode: points drawn
   double cpuMs = 0;            // culling + submission + glFinish, wall clock
   double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)

@@ -237,6 +237,21 @@ Status runCommand(AppState& s, GLFWwindow* win, const ScriptCommand& c, bool& qu
   return Status::ok();
 }
 
+// The slices count (0: auto, from each cell's distance) and axis; auto mode's switch size.
+void drawLodSettings(AppState& s) {
+  if (s.rs.mode == RenderMode::kSlices) {
+    ImGui::SliderInt("slices (0 auto)", &s.rs.slices, 0, kAutoSlices);
+    const char* axes[] = {"nearest the view", "u", "v", "w"};
+    int axis = s.rs.sliceAxis + 1;
+    if (ImGui::Combo("slice axis", &axis, axes, 4)) s.rs.sliceAxis = axis - 1;
+  }
+  if (s.rs.mode == RenderMode::kAuto) {
+    float px = float(s.rs.autoPixels);
+    if (ImGui::SliderFloat("slices under (px)", &px, 1.f, 64.f, "%.0f")) s.rs.autoPixels = px;
+    ImGui::Text("%u boxes as slices, %u marched, %u splats", s.stats.sliced, s.stats.drawn, s.stats.splats);
+  }
+}
+
 // The panel's surface section: the mode menu (every mode of the registry, what a pack without its
 // section draws instead), the work counters, the march settings and the skips.
 void drawSurfacePanel(AppState& s) {
@@ -262,6 +277,7 @@ void drawSurfacePanel(AppState& s) {
     if (s.rs.mode != RenderMode::kPoints && s.renderer->drawnMode(s.rs.mode) != s.rs.mode)
       ImGui::TextWrapped("not baked into this pack: drawing %s (scanatlas bake PACK --mode %s)",
                          modeName(s.renderer->drawnMode(s.rs.mode)), modeName(s.rs.mode));
+    drawLodSettings(s);
     ImGui::Checkbox("work counters", &s.rs.countWork);
     if (s.rs.countWork && s.stats.work.valid) {
       const WorkCounters& w = s.stats.work;

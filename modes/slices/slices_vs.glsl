@@ -15,7 +15,7 @@ uniform mat4 projection;    // infinite reverse-Z
 uniform int sliceCount;     // 0: auto
 uniform int sliceAxis;      // -1: per cell against the view; 0, 1, 2: always u, v or w
 uniform float pixelAngle;   // the camera's field of view over its height in pixels (radians)
-const int kAutoSlices = 64; // viewer/renderer.h kAutoSlices
+uniform int autoSlices;     // auto: at most this many (viewer/renderer.h kAutoSlices; auto mode: fewer)
 
 layout(std430, binding = 1) readonly buffer DrawItems { uvec2 items[]; };  // (cell, steps)
 
@@ -43,8 +43,8 @@ void main() {
     float texel = min((hi.x - lo.x) / c.boxW.z, (hi.y - lo.y) / c.boxW.w);
     float along = max(length(toBox) * pixelAngle, texel) * max(abs(toBox[axis]) / max(length(toBox), 1e-30), 1e-3);
     n = 2;
-    while (n < kAutoSlices && (hi[axis] - lo[axis]) / float(n - 1) > along) n *= 2;
-    drawn = kAutoSlices;
+    while (n < autoSlices && (hi[axis] - lo[axis]) / float(n - 1) > along) n *= 2;
+    drawn = autoSlices;
   }
   int s = gl_VertexID / 6, corner = kQuad[gl_VertexID % 6];
   int across = axis;
