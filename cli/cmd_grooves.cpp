@@ -26,6 +26,11 @@ constexpr const char* kHelp =
     "cracks narrower than about 1.5 spacings are not in the data.\n\n"
     "  --json FILE          every groove: polyline, width, depth, length, confidence, profile (editable)\n"
     "  --csv FILE           one row per groove; the polyline as 'x y z;x y z;...'\n"
+    "  --grooves FILE       measure these grooves (a grooves JSON: edited, or polylines drawn by\n"
+    "                       hand; only \"polyline\" and \"width\" are needed) instead of detecting:\n"
+    "                       width, depth, shape and profile from the points across each line, the\n"
+    "                       line lifted onto the rim; a line with too few points beside it is kept\n"
+    "                       as given\n"
     "  --spacing S          sample spacing in input units (default: measured)\n"
     "  --min-width W        narrowest groove looked for, in spacings (default 1.5)\n"
     "  --max-width W        widest, in spacings (default 8)\n"
@@ -104,8 +109,8 @@ Status packInputs(std::vector<std::string>& inputs, std::string& columns) {
 int cmdGrooves(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"json", "csv", "spacing", "min-width", "max-width", "min-length", "threshold", "low-threshold",
-                      "region"},
+                     {"json", "csv", "grooves", "spacing", "min-width", "max-width", "min-length", "threshold",
+                      "low-threshold", "region"},
                      {"no-gaps", "quiet", "help"}, {{"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);
@@ -146,7 +151,18 @@ int cmdGrooves(int argc, char** argv) {
       if (d == t || d % 64 == 0) std::fprintf(stderr, "\rgrooves: region %llu / %llu", (unsigned long long)d, (unsigned long long)t);
       if (d == t) std::fprintf(stderr, "\n");
     };
-  const GrooveSet set = detectGrooves(sink.pos.data(), sink.pos.size() / 3, opt);
+  GrooveSet set;
+  if (a.has("grooves")) {
+    Result<GrooveSet> given = readGroovesJson(a.get("grooves"));
+    if (!given) return reportError(given.status());
+    set = measureGrooves(sink.pos.data(), sink.pos.size() / 3, *given, opt);
+    std::fprintf(stderr, "grooves: measured %zu given groove%s from %s", set.grooves.size() - set.unmeasured,
+                 set.grooves.size() - set.unmeasured == 1 ? "" : "s", a.get("grooves").c_str());
+    if (set.unmeasured) std::fprintf(stderr, "; %u with too few points beside them kept as given", set.unmeasured);
+    std::fprintf(stderr, "\n");
+  } else {
+    set = detectGrooves(sink.pos.data(), sink.pos.size() / 3, opt);
+  }
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (a.has("json") && !(s = writeGroovesJson(set, a.get("json")))) return reportError(s);
   if (a.has("csv") && !(s = writeGroovesCsv(set, a.get("csv")))) return reportError(s);

@@ -296,6 +296,59 @@ struct Region {
   double side = 0;
 };
 
+// The points in cubes of `side` (indices), for gathering a box's points with a margin.
+class SceneIndex {
+ public:
+  SceneIndex(const double* pos, size_t n, double side, double margin) : pos_(pos), side_(side), margin_(margin) {
+    lo_ = Eigen::Vector3d(pos[0], pos[1], pos[2]);
+    for (size_t i = 0; i < n; ++i) lo_ = lo_.cwiseMin(Eigen::Vector3d(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]));
+    for (size_t i = 0; i < n; ++i) {
+      Key k;
+      for (int a = 0; a < 3; ++a) k[a] = int(std::floor((pos[3 * i + a] - lo_[a]) / side));
+      blocks_[k].push_back(uint32_t(i));
+    }
+  }
+  // The cubes holding at least 64 points.
+  std::vector<Region> regions() const {
+    std::vector<Region> out;
+    for (const auto& [k, v] : blocks_)
+      if (v.size() >= 64) out.push_back({lo_ + Eigen::Vector3d(k[0], k[1], k[2]) * side_, side_});
+    return out;
+  }
+  // The points of the box [lo, lo + size) grown by the margin; returns how many lie in the box.
+  size_t gather(const Eigen::Vector3d& lo, const Eigen::Vector3d& size, std::vector<Eigen::Vector3d>& world) const {
+    Key k0, k1;
+    for (int a = 0; a < 3; ++a) {
+      k0[a] = int(std::floor((lo[a] - margin_ - lo_[a]) / side_));
+      k1[a] = int(std::floor((lo[a] + size[a] + margin_ - lo_[a]) / side_));
+    }
+    size_t inside = 0;
+    for (int z = k0[2]; z <= k1[2]; ++z)
+      for (int y = k0[1]; y <= k1[1]; ++y)
+        for (int x = k0[0]; x <= k1[0]; ++x) {
+          auto it = blocks_.find(Key{x, y, z});
+          if (it == blocks_.end()) continue;
+          for (uint32_t i : it->second) {
+            const Eigen::Vector3d p(pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]);
+            const Eigen::Vector3d d = p - lo;
+            if (!(d.array() >= -margin_).all() || !(d.array() < size.array() + margin_).all()) continue;
+            world.push_back(p);
+            inside += (d.array() >= 0).all() && (d.array() < size.array()).all();
+          }
+        }
+    return inside;
+  }
+  size_t gather(const Eigen::Vector3d& lo, double side, std::vector<Eigen::Vector3d>& world) const {
+    return gather(lo, Eigen::Vector3d::Constant(side), world);
+  }
+
+ private:
+  const double* pos_;
+  double side_, margin_;
+  Eigen::Vector3d lo_;
+  std::map<Key, std::vector<uint32_t>> blocks_;
+};
+
 struct SceneSide {
   bool planar = false;
   Eigen::Vector3d dir = Eigen::Vector3d::Zero(), centroid = Eigen::Vector3d::Zero();
@@ -346,41 +399,10 @@ GrooveSet detectGrooves(const double* pos, size_t n, const GrooveOptions& opt) {
   GrooveSet set;
   if (n < 16) return set;
   set.spacing = opt.spacing > 0 ? opt.spacing : estimateSpacing(pos, n).area;
-  const double s = set.spacing, side = opt.region * s, margin = 2 * opt.maxWidth * s;
-  Eigen::Vector3d lo(pos[0], pos[1], pos[2]);
-  for (size_t i = 0; i < n; ++i) lo = lo.cwiseMin(Eigen::Vector3d(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]));
-  std::map<Key, std::vector<uint32_t>> blocks;
-  for (size_t i = 0; i < n; ++i) {
-    Key k;
-    for (int a = 0; a < 3; ++a) k[a] = int(std::floor((pos[3 * i + a] - lo[a]) / side));
-    blocks[k].push_back(uint32_t(i));
-  }
-  std::vector<Region> regions;
-  for (const auto& [k, v] : blocks)
-    if (v.size() >= 64) regions.push_back({lo + Eigen::Vector3d(k[0], k[1], k[2]) * side, side});
-  // A region's points and its margin's; returns how many lie in the region itself.
-  auto gather = [&](const Region& r, std::vector<Eigen::Vector3d>& world) {
-    Key k0, k1;
-    for (int a = 0; a < 3; ++a) {
-      k0[a] = int(std::floor((r.lo[a] - margin - lo[a]) / side));
-      k1[a] = int(std::floor((r.lo[a] + r.side + margin - lo[a]) / side));
-    }
-    size_t inside = 0;
-    for (int z = k0[2]; z <= k1[2]; ++z)
-      for (int y = k0[1]; y <= k1[1]; ++y)
-        for (int x = k0[0]; x <= k1[0]; ++x) {
-          auto it = blocks.find(Key{x, y, z});
-          if (it == blocks.end()) continue;
-          for (uint32_t i : it->second) {
-            const Eigen::Vector3d p(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]);
-            const Eigen::Vector3d d = p - r.lo;
-            if (!(d.array() >= -margin).all() || !(d.array() < r.side + margin).all()) continue;
-            world.push_back(p);
-            inside += (d.array() >= 0).all() && (d.array() < r.side).all();
-          }
-        }
-    return inside;
-  };
+  const double s = set.spacing, side = opt.region * s;
+  const SceneIndex index(pos, n, side, 2 * opt.maxWidth * s);
+  std::vector<Region> regions = index.regions();
+  auto gather = [&](const Region& r, std::vector<Eigen::Vector3d>& world) { return index.gather(r.lo, r.side, world); };
   const SceneSide sceneSide = decideSide(pos, n, opt, regions, gather, s);
   auto outside = [&](const Eigen::Vector3d& m) { return sceneSide.planar ? sceneSide.dir : Eigen::Vector3d(m - sceneSide.centroid); };
   std::vector<Fragment> all;
@@ -431,6 +453,91 @@ GrooveSet detectGrooves(const double* pos, size_t n, const GrooveOptions& opt) {
     if (g.length >= opt.minLength * s) set.grooves.push_back(std::move(g));
   }
   dropDuplicates(set.grooves, s);
+  return set;
+}
+
+namespace {
+
+// A given groove's polyline cut into pieces of at most `len` (sharing their end points).
+std::vector<std::vector<Eigen::Vector3d>> piecesOf(const std::vector<Eigen::Vector3d>& line, double step, double len) {
+  const std::vector<Eigen::Vector3d> dense = resample(line, step);
+  std::vector<std::vector<Eigen::Vector3d>> out(1);
+  double run = 0;
+  for (size_t k = 0; k < dense.size(); ++k) {
+    if (k) run += (dense[k] - dense[k - 1]).norm();
+    out.back().push_back(dense[k]);
+    if (run >= len && k + 1 < dense.size()) {
+      out.push_back({dense[k]});
+      run = 0;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+GrooveSet measureGrooves(const double* pos, size_t n, const GrooveSet& given, const GrooveOptions& opt) {
+  GrooveSet set;
+  set.grooves = given.grooves;
+  set.unmeasured = uint32_t(given.grooves.size());
+  if (n < 16) return set;
+  set.spacing = opt.spacing > 0 ? opt.spacing : estimateSpacing(pos, n).area;
+  const double s = set.spacing;
+  const SceneIndex index(pos, n, opt.region * s, 3 * opt.maxWidth * s);
+  auto gather = [&](const Region& r, std::vector<Eigen::Vector3d>& world) { return index.gather(r.lo, r.side, world); };
+  const SceneSide sceneSide = decideSide(pos, n, opt, index.regions(), gather, s);
+  auto outside = [&](const Eigen::Vector3d& m) { return sceneSide.planar ? sceneSide.dir : Eigen::Vector3d(m - sceneSide.centroid); };
+  struct Piece {
+    size_t groove;
+    std::vector<Eigen::Vector3d> line;
+    Fragment measured;
+    double noise = -1;
+  };
+  std::vector<Piece> pieces;
+  for (size_t gi = 0; gi < given.grooves.size(); ++gi)
+    for (auto& l : piecesOf(given.grooves[gi].line, s / 2, opt.region * s)) pieces.push_back({gi, std::move(l), {}, -1});
+  tbb::parallel_for(size_t(0), pieces.size(), [&](size_t k) {
+    Piece& pc = pieces[k];
+    if (pc.line.size() < 2) return;
+    Eigen::Vector3d lo = pc.line[0], hi = pc.line[0];
+    for (const Eigen::Vector3d& p : pc.line) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+    std::vector<Eigen::Vector3d> world, uvh;
+    index.gather(lo, hi - lo, world);
+    Eigen::Matrix3d frame;
+    Eigen::Vector3d mean;
+    if (world.size() < 16 || !planarFrame(world, s, outside, frame, mean, uvh)) return;
+    std::vector<Eigen::Vector2d> uv;
+    for (const Eigen::Vector3d& p : pc.line) uv.push_back((frame.transpose() * (p - mean)).head<2>());
+    grooves::PlaneLine pl;
+    double noise = 0;
+    if (!grooves::measureInPlane(uvh, uv, s, opt, pl, noise)) return;
+    pc.noise = noise;
+    for (const Eigen::Vector3d& q : pl.uvh) pc.measured.line.push_back(mean + frame * q);
+    pc.measured.width = pl.width;
+    pc.measured.depth = pl.depth;
+    pc.measured.shape = pl.shape;
+    pc.measured.profile = pl.profile;
+    pc.measured.confidence = given.grooves[pc.groove].confidence;
+  });
+  // Per groove: its measured pieces merged (lines joined end to end, values length-weighted).
+  std::vector<std::vector<std::pair<int, bool>>> chains(given.grooves.size());
+  std::vector<Fragment> frags;
+  std::vector<float> ns;
+  for (Piece& pc : pieces) {
+    if (pc.noise < 0) continue;
+    chains[pc.groove].push_back({int(frags.size()), false});
+    frags.push_back(std::move(pc.measured));
+    ns.push_back(float(pc.noise));
+  }
+  set.unmeasured = 0;
+  for (size_t gi = 0; gi < given.grooves.size(); ++gi) {
+    if (chains[gi].empty()) {
+      ++set.unmeasured;  // kept as given
+      continue;
+    }
+    set.grooves[gi] = mergeChain(frags, chains[gi], s);
+  }
+  set.noise = grooves::median(ns);
   return set;
 }
 

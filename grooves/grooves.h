@@ -32,6 +32,7 @@ struct GrooveSet {
   double spacing = 0;  // sample spacing of the points (the widths' uncertainty)
   double noise = 0;    // measured noise (robust std of the residual), world units
   uint32_t regions = 0, skippedRegions = 0;  // skipped: not a height field in any frame
+  uint32_t unmeasured = 0;  // measureGrooves: given grooves with too few points beside them (kept as given)
   std::vector<Groove> grooves;
   double totalLength() const;
 };
@@ -55,6 +56,12 @@ struct GrooveOptions {
 
 // pos: n xyz-interleaved positions, world units.
 GrooveSet detectGrooves(const double* pos, size_t n, const GrooveOptions& opt);
+
+// Given grooves (a user's, edited or hand-drawn: GrooveSet::grooves' lines) measured in the
+// points: per piece of --region spacings a PCA plane, the robust low-pass, a V or U profile
+// fitted to the points across the line; the line is lifted to the rim. Grooves with too few
+// points beside them are kept as given (GrooveSet::unmeasured).
+GrooveSet measureGrooves(const double* pos, size_t n, const GrooveSet& given, const GrooveOptions& opt);
 
 // Export / import (grooves_io.cpp). JSON holds everything; CSV one row per groove with the
 // polyline as a ';'-separated list of x y z triples.

@@ -236,10 +236,26 @@ struct Across {
   std::vector<double> x, r;
 };
 
+// Points bucketed by 8 pixels for the profile fits.
+struct Buckets {
+  static constexpr int kPx = 8;
+  int w = 0, h = 0;
+  std::vector<std::vector<int>> lists;
+  Buckets(const std::vector<Eigen::Vector3d>& pts, const Grid& g)
+      : w((g.w + kPx - 1) / kPx), h((g.h + kPx - 1) / kPx), lists(size_t(w) * h) {
+    for (size_t i = 0; i < pts.size(); ++i) {
+      const Eigen::Vector2d px = g.toPixel(pts[i].x(), pts[i].y());
+      const int bx = std::clamp(int(px.x()) / kPx, 0, w - 1), by = std::clamp(int(px.y()) / kPx, 0, h - 1);
+      lists[size_t(by) * w + bx].push_back(int(i));
+    }
+  }
+};
+
 Across pointsAcross(const std::vector<Eigen::Vector2d>& line, const std::vector<Eigen::Vector3d>& pts,
-                    const std::vector<float>& resid, const std::vector<std::vector<int>>& buckets, const Grid& g,
-                    int bucketPx, int bw, int bh, double reach) {
+                    const std::vector<float>& resid, const Buckets& b, const Grid& g, double reach) {
   Across a;
+  const int bucketPx = Buckets::kPx, bw = b.w, bh = b.h;
+  const auto& buckets = b.lists;
   Eigen::Vector2d lo = line[0], hi = line[0];
   for (const Eigen::Vector2d& q : line) lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
   const Eigen::Vector2d plo = g.toPixel(lo.x() - reach, lo.y() - reach), phi = g.toPixel(hi.x() + reach, hi.y() + reach);
@@ -485,7 +501,28 @@ Surface surfaceOf(const std::vector<Eigen::Vector3d>& pts, double s, const Groov
   return f;
 }
 
+// A line in the plane at the rim's height (the low-pass).
+void liftToRim(const Surface& f, const std::vector<Eigen::Vector2d>& uv, PlaneLine& pl) {
+  for (const Eigen::Vector2d& q : uv) {
+    const Eigen::Vector2d px = f.g.toPixel(q.x(), q.y());
+    pl.uvh.emplace_back(q.x(), q.y(), f.L.bilinear(px.x(), px.y()));
+  }
+}
+
 }  // namespace
+
+bool measureInPlane(const std::vector<Eigen::Vector3d>& pts, const std::vector<Eigen::Vector2d>& line, double s,
+                    const GrooveOptions& opt, PlaneLine& out, double& noise) {
+  if (pts.size() < 16 || line.size() < 2) return false;
+  const Surface f = surfaceOf(pts, s, opt);
+  noise = f.noise;
+  const Buckets buckets(pts, f.g);
+  const Across a = pointsAcross(line, pts, f.resid, buckets, f.g, opt.maxWidth * s);
+  if (a.x.size() < 8) return false;
+  fitProfile(a, s, opt, out);
+  liftToRim(f, line, out);
+  return true;
+}
 
 double sideEvidence(const std::vector<Eigen::Vector3d>& pts, double s, const GrooveOptions& opt) {
   if (pts.size() < 16) return 0;
@@ -512,20 +549,8 @@ PlaneResult detectInPlane(const std::vector<Eigen::Vector3d>& pts, double s, con
   for (double hw = opt.minWidth / 2; hw <= opt.maxWidth / 2 + 1e-9; hw *= 2) scales.push_back(hw * s / g.p);
   const std::vector<Valley> vs = valleys(R, covered, scales, 0.5 * opt.maxWidth * s / g.p);
   const auto chains = linkLines(vs, g.w, g.h, float(opt.threshold), float(opt.lowThreshold));
-  // Points bucketed by 8 pixels for the profile fits.
-  const int bp = 8, bw = (g.w + bp - 1) / bp, bh = (g.h + bp - 1) / bp;
-  std::vector<std::vector<int>> buckets(size_t(bw) * bh);
-  for (size_t i = 0; i < pts.size(); ++i) {
-    const Eigen::Vector2d px = g.toPixel(pts[i].x(), pts[i].y());
-    const int bx = std::clamp(int(px.x()) / bp, 0, bw - 1), by = std::clamp(int(px.y()) / bp, 0, bh - 1);
-    buckets[size_t(by) * bw + bx].push_back(int(i));
-  }
-  auto lift = [&](const std::vector<Eigen::Vector2d>& uv, PlaneLine& pl) {
-    for (const Eigen::Vector2d& q : uv) {
-      const Eigen::Vector2d px = g.toPixel(q.x(), q.y());
-      pl.uvh.emplace_back(q.x(), q.y(), L.bilinear(px.x(), px.y()));
-    }
-  };
+  const Buckets buckets(pts, g);
+  auto lift = [&](const std::vector<Eigen::Vector2d>& uv, PlaneLine& pl) { liftToRim(f, uv, pl); };
   for (const std::vector<int>& chain : chains) {
     std::vector<Eigen::Vector2d> uv;
     double zsum = 0;
@@ -534,7 +559,7 @@ PlaneResult detectInPlane(const std::vector<Eigen::Vector3d>& pts, double s, con
       zsum += vs[i].z;
     }
     PlaneLine pl;
-    const Across a = pointsAcross(uv, pts, resid, buckets, g, bp, bw, bh, opt.maxWidth * s);
+    const Across a = pointsAcross(uv, pts, resid, buckets, g, opt.maxWidth * s);
     if (a.x.size() < 8) continue;
     fitProfile(a, s, opt, pl);
     if (pl.depth < std::max(opt.minDepth * s, 2 * res.noise)) continue;

@@ -27,6 +27,11 @@ struct PlaneResult {
 // the point count: positive when the frame's normal points out of the grooved side.
 double sideEvidence(const std::vector<Eigen::Vector3d>& uvh, double spacing, const GrooveOptions& opt);
 
+// Width, depth, shape and profile of a given line (plane coordinates) from the points across it;
+// false when too few points lie beside it.
+bool measureInPlane(const std::vector<Eigen::Vector3d>& uvh, const std::vector<Eigen::Vector2d>& line, double spacing,
+                    const GrooveOptions& opt, PlaneLine& out, double& noise);
+
 PlaneResult detectInPlane(const std::vector<Eigen::Vector3d>& uvh, double spacing, const GrooveOptions& opt);
 
 }  // namespace sa::grooves

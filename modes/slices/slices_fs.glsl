@@ -54,7 +54,8 @@ void main() {
     vec3 nFrame;
     uint steps;
     bool touched = false;
-    if (!gdmWalk(c, blk, vCamFrame, d, slabStart(c, p, d), 1.0, slabStart(c, p, d), tHit, nFrame, steps, touched)) discard;
+    float t0 = slabStart(c, p, d);
+    if (!gdmWalk(c, blk, vCamFrame, d, t0, 1.0, t0, tHit, nFrame, steps, touched)) discard;
     nWorld = c.axisU.xyz * nFrame.x + c.axisV.xyz * nFrame.y + c.axisW.xyz * nFrame.z;
   } else {
     // Inside: under the covered surface (the height field's solid), and the first slice inside

@@ -112,7 +112,9 @@ TEST(Cli, PackInfoBenchEvalJson) {
               "--iterations 4,12 --compare-skips --json --csv " + d.file("b.csv"));
   ASSERT_EQ(b.code, 0) << b.out;
   auto bj = nlohmann::json::parse(b.out);
-  ASSERT_EQ(bj["configs"].size(), 2u + 1u + 6u);  // 2 parallax, points, 6 skip comparisons
+  ASSERT_EQ(bj["configs"].size(), 2u + 1u + 6u + 1u);  // 2 parallax, points, 6 skip comparisons, auto
+  EXPECT_EQ(bj["configs"].back()["mode"], "auto");
+  EXPECT_EQ(bj["configs"].back()["skips"], "all+auto-slices");
   for (const auto& c : bj["configs"]) {
     EXPECT_GT(c["cpu_ms"]["median"].get<double>(), 0) << c.dump();
     EXPECT_GE(c["cpu_ms"]["p99"].get<double>(), c["cpu_ms"]["median"].get<double>());
@@ -121,7 +123,7 @@ TEST(Cli, PackInfoBenchEvalJson) {
   std::ifstream csv(d.file("b.csv"));
   size_t lines = 0;
   for (std::string l; std::getline(csv, l);) ++lines;
-  EXPECT_EQ(lines, 1u + 9u * 4u);  // header + frames
+  EXPECT_EQ(lines, 1u + 10u * 4u);  // header + frames
 
   CmdResult e = run("eval " + d.file("ico.hfa") + " --reference " + d.file("ico.ply") +
               " --orbit 3 --size 96x96 --mode parallax,points --iterations 12 --json");
@@ -435,6 +437,22 @@ TEST(Cli, GroovesExportJsonAndCsv) {
   ASSERT_EQ(run("grooves " + d.file("wall.hfa") + " --json " + d.file("p.json") + " --quiet").code, 0);
   std::ifstream pf(d.file("p.json"));
   EXPECT_EQ(nlohmann::json::parse(pf)["grooves"].size(), j["grooves"].size());
+  // Given (hand-drawn) grooves measured: the first detected line with a placeholder width.
+  {
+    nlohmann::json given;
+    given["grooves"] = nlohmann::json::array();
+    given["grooves"].push_back({{"width", 1}, {"polyline", j["grooves"][0]["polyline"]}});
+    test::writeText(d.file("given.json"), given.dump());
+    ASSERT_EQ(run("grooves " + in + " --grooves " + d.file("given.json") + " --json " + d.file("m.json") + " --quiet").code, 0);
+    std::ifstream mf(d.file("m.json"));
+    const nlohmann::json m = nlohmann::json::parse(mf);
+    ASSERT_EQ(m["grooves"].size(), 1u);
+    EXPECT_NEAR(m["grooves"][0]["width"].get<double>(), j["grooves"][0]["width"].get<double>(), 0.5);
+    test::writeText(d.file("bad.json"), "{\"grooves\": [{\"polyline\": []}]}");
+    const CmdResult bad = runErr("grooves " + in + " --grooves " + d.file("bad.json"), d.file("err2.txt"));
+    EXPECT_EQ(bad.code, 2);
+    EXPECT_NE(bad.err.find("bad.json"), std::string::npos) << bad.err;
+  }
   EXPECT_EQ(run("grooves --help").code, 0);
   EXPECT_EQ(run("grooves").code, 2);
   EXPECT_EQ(run("grooves " + d.file("missing.ply")).code, 2);

@@ -198,6 +198,38 @@ TEST(Grooves, UncoveredCracksAreGaps) {
   EXPECT_LT(sc.falseLength, 0.02 * sc.allTrue);
 }
 
+// Given grooves (here the true centre lines with a placeholder width, as a user would draw
+// them) measured in the points: widths and depths as the detector's bounds; a line away from
+// every point is kept as given.
+TEST(Grooves, MeasuresGivenGrooves) {
+  const SyntheticScan scan = makeGrooveScan(kSize, kSpacing, kNoise, acceptanceGrooves(kSize, kSpacing, kNoise), 9);
+  GrooveSet given;
+  for (const SyntheticGroove& t : scan.grooves) {
+    Groove g;
+    for (const Eigen::Vector2d& p : t.line) g.line.push_back(scan.toWorld(p));
+    g.width = 1;
+    g.shape = "given";
+    given.grooves.push_back(g);
+  }
+  Groove away;
+  away.line = {scan.toWorld({100, 100}) + 300 * scan.frame.col(2), scan.toWorld({150, 100}) + 300 * scan.frame.col(2)};
+  away.width = 2;
+  given.grooves.push_back(away);
+  const GrooveSet set = measureGrooves(scan.pos.data(), scan.pos.size() / 3, given, GrooveOptions{});
+  ASSERT_EQ(set.grooves.size(), given.grooves.size());
+  EXPECT_EQ(set.unmeasured, 1u);
+  EXPECT_EQ(set.grooves.back().width, 2);
+  for (size_t gi = 0; gi < scan.grooves.size(); ++gi) {
+    const SyntheticGroove& t = scan.grooves[gi];
+    const Groove& g = set.grooves[gi];
+    std::printf("  groove %zu: %s width %.2f (true %.2f %s), depth %.2f (true %.2f) noise\n", gi, g.shape.c_str(), g.width,
+                t.width, t.rounded ? "U" : "V", g.depth / kNoise, t.depth / kNoise);
+    if (!required(t)) continue;
+    EXPECT_LE(std::fabs(g.width - t.width), kSpacing) << "groove " << gi;
+    EXPECT_LE(std::fabs(g.depth - t.depth), 2 * kNoise + 0.1 * t.depth) << "groove " << gi;
+  }
+}
+
 TEST(Grooves, JsonRoundTripAndErrors) {
   const std::string dir = testing::TempDir();
   GrooveSet set;
