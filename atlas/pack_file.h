@@ -121,5 +121,9 @@ class PackReader {
 // The source files the pack was made from (its NOTE's "source:" lines) and the --columns spec of
 // text inputs ("columns:"), for bakes and commands that go back to the raw points.
 std::vector<std::string> packSources(const PackReader& pack, std::string& columns);
+inline std::vector<std::string> packSources(const PackReader& pack) {
+  std::string columns;
+  return packSources(pack, columns);
+}
 
 }  // namespace sa

@@ -38,7 +38,7 @@ Result<std::string> packForView(const std::string& path, bool quiet) {
 
 int cmdView(int argc, char** argv) {
   Args a;
-  Status s = a.parse(argc, argv, {"script", "measurements", "size"}, {"no-vsync", "quiet", "help"},
+  Status s = a.parse(argc, argv, {"script", "measurements", "size", "grooves"}, {"no-vsync", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::printf(
@@ -54,6 +54,8 @@ int cmdView(int argc, char** argv) {
         "  --no-vsync             render as fast as possible\n"
         "  --script FILE          replay a session (below), then close\n"
         "  --measurements FILE    picks and measurements as CSV (default: stdout)\n"
+        "  --grooves FILE         a grooves JSON (scanatlas grooves): listed in the panel with width,\n"
+        "                         depth and length (click to fly there) and drawn over the view\n"
         "\n%s",
         kViewerScriptHelp);
     return 0;
@@ -63,6 +65,7 @@ int cmdView(int argc, char** argv) {
   ViewerOptions opt;
   opt.scriptPath = a.get("script");
   opt.measurementsPath = a.get("measurements");
+  opt.groovesPath = a.get("grooves");
   opt.vsync = !a.flag("no-vsync");
   opt.quiet = a.flag("quiet");
   if (a.has("size")) {

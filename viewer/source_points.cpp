@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <filesystem>
-#include <sstream>
 
 #include "formats/source.h"
 #include "viewer/renderer.h"
@@ -35,28 +34,13 @@ class ToFloats : public BatchSink {
 
 }  // namespace
 
-std::vector<std::string> packSources(const PackReader& pack) {
-  std::vector<std::string> out;
-  std::istringstream in(pack.note());
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("source: ", 0) == 0) out.push_back(line.substr(8));
-  return out;
-}
-
 Status loadSourcePoints(const PackReader& pack, SourcePoints& out) {
-  const auto sources = packSources(pack);
+  std::string columns;
+  const auto sources = packSources(pack, columns);
   if (sources.empty()) return Status::badInput(pack.path() + ": the pack names no source files (NOTE section)");
   for (const auto& s : sources)
     if (!std::filesystem::exists(s))
       return Status::badInput(pack.path() + ": source file " + s + " is gone; the points baseline reads the sources");
-  std::string columns;
-  {
-    std::istringstream in(pack.note());
-    std::string line;
-    while (std::getline(in, line))
-      if (line.rfind("columns: ", 0) == 0) columns = line.substr(9);
-  }
   auto input = InputSet::open(sources, columns);
   if (!input) return input.status();
   out.xyz.clear();

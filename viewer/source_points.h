@@ -9,8 +9,6 @@
 
 namespace sa {
 
-std::vector<std::string> packSources(const PackReader& pack);
-
 struct SourcePoints {
   std::vector<float> xyz;     // relative to the pack origin
   std::vector<uint8_t> rgba;  // white when the source has no colour

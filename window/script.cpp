@@ -26,7 +26,7 @@ const std::map<std::string, Spec>& specs() {
       {"shading", {0, {"lambert", "normals", "height", "color"}}},
       {"edl", {0, {"on", "off"}}},                      {"boxes", {0, {"on", "off"}}},
       {"iterations", {1, {}}}, {"screenshot", {0, {}, true}}, {"windowshot", {0, {}, true}},
-      {"bookmark", {0, {}}},   {"wait", {1, {}}}};
+      {"bookmark", {0, {}}},   {"wait", {1, {}}},       {"groove", {1, {}}}};
   return s;
 }
 

@@ -27,6 +27,7 @@
 #include "viewer/source_points.h"
 #include "window/script.h"
 #include "common/fileio.h"
+#include "grooves/grooves.h"
 
 namespace sa {
 
@@ -47,6 +48,8 @@ const char* kViewerScriptHelp =
     "  screenshot FILE.png [W H]      the current view, at window resolution or W x H (.png or .jpg)\n"
     "  windowshot FILE.png            the whole window, panel included\n"
     "  bookmark                       append the camera to PACK.views.json\n"
+    "  groove N                       select groove N of --grooves and fly to it (logged with its\n"
+    "                                 width, depth, length and centre)\n"
     "  wait N                         render N frames\n"
     "  quit\n";
 
@@ -76,6 +79,8 @@ struct AppState {
   std::string packPath;
   std::string pendingWindowShot;
   std::FILE* measureOut = stdout;
+  GrooveSet grooves;   // --grooves
+  int grooveSel = -1;  // selected in the panel or by the script
 };
 
 void logResult(AppState& s, const std::string& line) {
@@ -166,6 +171,81 @@ Status bookmark(AppState& s) {
 }
 
 // Runs one (parsed, checked) script command; sets `quit` on quit.
+// The point halfway along a polyline.
+Eigen::Vector3d midpoint(const std::vector<Eigen::Vector3d>& l) {
+  double total = 0;
+  for (size_t k = 0; k + 1 < l.size(); ++k) total += (l[k + 1] - l[k]).norm();
+  double run = 0;
+  for (size_t k = 0; k + 1 < l.size(); ++k) {
+    const double seg = (l[k + 1] - l[k]).norm();
+    if (run + seg >= total / 2 && seg > 0) return l[k] + (l[k + 1] - l[k]) * ((total / 2 - run) / seg);
+    run += seg;
+  }
+  return l.empty() ? Eigen::Vector3d::Zero() : l[0];
+}
+
+// Selects groove i and flies there: the view direction kept, the whole groove (at least 20
+// widths of it) in view; its measures go to the log.
+void flyToGroove(AppState& s, int i) {
+  const Groove& g = s.grooves.grooves[size_t(i)];
+  s.grooveSel = i;
+  Camera& cam = s.cc.camera();
+  const Eigen::Vector3d c = midpoint(g.line), f = cam.forward();
+  const double extent = std::max({g.length, 20 * g.width, 1e-9});
+  const double dist = 0.6 * extent / std::tan(cam.fovDeg * M_PI / 360);
+  cam.target = c;
+  cam.eye = c - f * dist;
+  s.pivot = c;
+  char line[320];
+  std::snprintf(line, sizeof(line), "groove,%d,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g", i, g.shape.c_str(), g.width,
+                g.shape == "gap" ? NAN : g.depth, g.length, c.x(), c.y(), c.z());
+  logResult(s, line);
+}
+
+// The grooves over the view: each polyline projected (drawn over the surface, not hidden by
+// it), the selected one thicker in yellow.
+void drawGrooveOverlay(AppState& s) {
+  if (s.grooves.grooves.empty()) return;
+  ImDrawList* dl = ImGui::GetBackgroundDrawList();
+  const double toWindow = 1.0 / std::max(ImGui::GetIO().DisplayFramebufferScale.x, 1e-3f);
+  std::vector<ImVec2> pts;
+  for (size_t i = 0; i < s.grooves.grooves.size(); ++i) {
+    const Groove& g = s.grooves.grooves[i];
+    pts.clear();
+    for (const Eigen::Vector3d& p : g.line) {
+      double px, py;
+      if (!s.cc.project(p, px, py)) {
+        pts.clear();
+        break;
+      }
+      pts.push_back(ImVec2(float(px * toWindow), float(py * toWindow)));
+    }
+    if (pts.size() < 2) continue;
+    const bool sel = int(i) == s.grooveSel;
+    const ImU32 col = sel ? IM_COL32(255, 230, 0, 255) : g.shape == "gap" ? IM_COL32(60, 120, 255, 200) : IM_COL32(255, 60, 0, 200);
+    dl->AddPolyline(pts.data(), int(pts.size()), col, 0, sel ? 3.f : 1.5f);
+  }
+}
+
+// The groove list: click a row to fly there.
+void drawGroovePanel(AppState& s) {
+  const auto& gs = s.grooves.grooves;
+  if (gs.empty() || !ImGui::CollapsingHeader("Grooves")) return;
+  ImGui::Text("%zu grooves (widths +- %.3g: the sample spacing)", gs.size(), s.grooves.spacing);
+  if (ImGui::BeginListBox("##grooves", ImVec2(-1, 160))) {
+    for (size_t i = 0; i < gs.size(); ++i) {
+      char row[160];
+      if (gs[i].shape == "gap")
+        std::snprintf(row, sizeof(row), "%3zu %-3s w %.3g  d ?  len %.3g", i, gs[i].shape.c_str(), gs[i].width, gs[i].length);
+      else
+        std::snprintf(row, sizeof(row), "%3zu %-3s w %.3g  d %.3g  len %.3g", i, gs[i].shape.c_str(), gs[i].width,
+                      gs[i].depth, gs[i].length);
+      if (ImGui::Selectable(row, int(i) == s.grooveSel)) flyToGroove(s, int(i));
+    }
+    ImGui::EndListBox();
+  }
+}
+
 Status runCommand(AppState& s, GLFWwindow* win, const ScriptCommand& c, bool& quit, int& waitFrames) {
   const std::string& cmd = c.name;
   const std::vector<double>& v = c.numbers;
@@ -233,6 +313,11 @@ Status runCommand(AppState& s, GLFWwindow* win, const ScriptCommand& c, bool& qu
     SA_RETURN_IF_ERROR(bookmark(s));
   } else if (cmd == "wait") {
     waitFrames = int(v[0]);
+  } else if (cmd == "groove") {
+    if (v[0] < 0 || v[0] >= double(s.grooves.grooves.size()))
+      return Status::badInput("groove " + std::to_string(int(v[0])) + ": --grooves holds " +
+                              std::to_string(s.grooves.grooves.size()) + " grooves");
+    flyToGroove(s, int(v[0]));
   }
   return Status::ok();
 }
@@ -309,6 +394,7 @@ void drawPanel(AppState& s, GLFWwindow* win) {
   ImGui::Text("boxes %u drawn, %u culled, %u splats", s.stats.drawn, s.stats.culled, s.stats.splats);
   ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
   drawSurfacePanel(s);
+  drawGroovePanel(s);
   if (ImGui::CollapsingHeader("Shading", ImGuiTreeNodeFlags_DefaultOpen)) {
     const char* modes[] = {"Lambert, head light", "normals", "height ramp", "scan colour"};
     if (ImGui::Combo("shading", &s.shadingChoice, modes, 4)) {
@@ -425,7 +511,15 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   // The script is read and checked whole before the window opens.
   std::vector<ScriptCommand> script;
   std::vector<std::string> inputs = packSources(s.pack);  // the points mode reads them
-  inputs.insert(inputs.end(), {packPath, opt.scriptPath});
+  inputs.insert(inputs.end(), {packPath, opt.scriptPath, opt.groovesPath});
+  if (!opt.groovesPath.empty()) {
+    Result<GrooveSet> g = readGroovesJson(opt.groovesPath);
+    if (!g) {
+      std::fprintf(stderr, "scanatlas: error: %s\n", g.status().message().c_str());
+      return 2;
+    }
+    s.grooves = std::move(*g);
+  }
   if (!opt.scriptPath.empty()) {
     auto loaded = loadScript(opt.scriptPath, inputs);
     if (!loaded) {
@@ -600,6 +694,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     glViewport(0, 0, fbw, fbh);
     s.renderer->present(fbw, fbh);
+    drawGrooveOverlay(s);
     drawPanel(s, win);
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());

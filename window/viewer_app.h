@@ -8,6 +8,7 @@ namespace sa {
 struct ViewerOptions {
   std::string scriptPath;        // commands to replay (see scanatlas view --help)
   std::string measurementsPath;  // where picks and measurements go (CSV); empty: stdout
+  std::string groovesPath;       // a grooves JSON (scanatlas grooves): listed in the panel, drawn over the view
   int width = 1280, height = 800;
   bool vsync = true;
   bool quiet = false;

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "../common/test_util.h"
+#include "grooves/grooves.h"
 #include "preprocess/pipeline.h"
 #include "viewer/camera.h"
 #include "viewer/image_io.h"
@@ -155,6 +156,50 @@ TEST_F(Window, PickAndMeasureAgainstKnownGeometryAtGeoreferencedOffset) {
   EXPECT_LE(worst, 1e-3);
   EXPECT_LE(std::abs(distance - trueDist), 0.005 * trueDist);
   EXPECT_LE(std::abs(polyline - truePoly), 0.005 * truePoly);
+}
+
+// --grooves: the list's "groove N" flies there (a pick at the window's centre lands on the
+// groove's middle), and a groove number past the list is a clear script error.
+TEST_F(Window, GrooveListFliesToTheGroove) {
+  const SyntheticScan scan = makeGrooveScan(200, 1, 0.1, acceptanceGrooves(200, 1, 0.1), 3);
+  {
+    std::ofstream o(dir_.file("wall.ply"), std::ios::binary);
+    o << "ply\nformat binary_little_endian 1.0\nelement vertex " << scan.pos.size() / 3
+      << "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+    o.write(reinterpret_cast<const char*>(scan.pos.data()), std::streamsize(scan.pos.size() * sizeof(double)));
+  }
+  const std::string sa = SA_BINARY;
+  ASSERT_EQ(run(sa + " pack " + dir_.file("wall.ply") + " -o " + dir_.file("wall.hfa") + " --quiet"), 0);
+  ASSERT_EQ(run(sa + " grooves " + dir_.file("wall.ply") + " --json " + dir_.file("g.json") + " --quiet"), 0);
+  Result<GrooveSet> gs = readGroovesJson(dir_.file("g.json"));
+  ASSERT_TRUE(gs.isOk());
+  ASSERT_GE(gs->grooves.size(), 2u);
+  test::writeText(dir_.file("fly.txt"), "size 400 300\ngroove 1\npick 200 150\nquit\n");
+  std::string out;
+  ASSERT_EQ(run(view(dir_.file("wall.hfa") + " --grooves " + dir_.file("g.json") + " --script " + dir_.file("fly.txt") +
+                     " --measurements " + dir_.file("fly.csv")), &out), 0) << out;
+  std::ifstream csv(dir_.file("fly.csv"));
+  Eigen::Vector3d centre(NAN, NAN, NAN), pick(NAN, NAN, NAN);
+  for (std::string l; std::getline(csv, l);) {
+    std::vector<std::string> f;
+    std::istringstream is(l);
+    for (std::string x; std::getline(is, x, ',');) f.push_back(x);
+    if (f[0] == "groove" && f.size() == 9) centre = Eigen::Vector3d(std::stod(f[6]), std::stod(f[7]), std::stod(f[8]));
+    if (f[0] == "pick" && f.size() == 5) pick = Eigen::Vector3d(std::stod(f[2]), std::stod(f[3]), std::stod(f[4]));
+  }
+  ASSERT_TRUE(centre.allFinite()) << out;
+  ASSERT_TRUE(pick.allFinite()) << out;
+  const Groove& g = gs->grooves[1];
+  std::printf("groove 1 (%s, width %.2f, length %.1f): centre %.3f %.3f %.3f, picked %.3f %.3f %.3f\n", g.shape.c_str(),
+              g.width, g.length, centre.x(), centre.y(), centre.z(), pick.x(), pick.y(), pick.z());
+  // The centre lies on the rim; the pick hits the groove's floor or wall near it.
+  EXPECT_LE((pick - centre).norm(), g.width + g.depth + 1.0);
+  test::writeText(dir_.file("past.txt"), "groove 99\nquit\n");
+  EXPECT_EQ(run(view(dir_.file("wall.hfa") + " --grooves " + dir_.file("g.json") + " --script " + dir_.file("past.txt")), &out), 2);
+  EXPECT_NE(out.find("groove 99"), std::string::npos) << out;
+  test::writeText(dir_.file("bad.json"), "[1, 2]");
+  EXPECT_EQ(run(view(dir_.file("wall.hfa") + " --grooves " + dir_.file("bad.json")), &out), 2);
+  EXPECT_NE(out.find("bad.json"), std::string::npos) << out;
 }
 
 TEST_F(Window, BadPackAndBadScriptGiveClearErrors) {
