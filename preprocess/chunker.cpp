@@ -52,7 +52,9 @@ class BoundsSink : public BatchSink {
       }
       out_.min = out_.min.cwiseMin(p);
       out_.max = out_.max.cwiseMax(p);
-      sum_ += p - (out_.count == 0 ? (ref_ = p) : ref_);  // shifted sum: no cancellation
+      const Eigen::Vector3d d = p - (out_.count == 0 ? (ref_ = p) : ref_);  // shifted sums: no cancellation
+      sum_ += d;
+      scatter_ += d * d.transpose();
       ++out_.count;
     }
     seen_ += b.size();
@@ -60,6 +62,11 @@ class BoundsSink : public BatchSink {
     return Status::ok();
   }
   Eigen::Vector3d centroid() const { return out_.count ? ref_ + sum_ / double(out_.count) : ref_; }
+  Eigen::Matrix3d covariance() const {
+    if (!out_.count) return Eigen::Matrix3d::Zero();
+    const Eigen::Vector3d m = sum_ / double(out_.count);
+    return scatter_ / double(out_.count) - m * m.transpose();
+  }
 
  private:
   template <class T>
@@ -80,6 +87,7 @@ class BoundsSink : public BatchSink {
   const InputSet& in_;
   bool strict_;
   Eigen::Vector3d sum_ = Eigen::Vector3d::Zero(), ref_ = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d scatter_ = Eigen::Matrix3d::Zero();
   bool haveColor_ = false;
   uint8_t first_[3] = {0, 0, 0};
 };
@@ -300,6 +308,7 @@ Status computeBounds(const InputSet& input, BoundsInfo& out, const ProgressFn& p
   BoundsSink sink(out, progress, input.pointCount(), input, strict, hash);
   SA_RETURN_IF_ERROR(input.stream(sink, false));
   out.centroid = sink.centroid();
+  out.covariance = sink.covariance();
   out.contentHash = sink.digest();
   if (out.count == 0) return Status::badInput(input.files()[0].path + ": no finite points in the input");
   return Status::ok();

@@ -51,6 +51,7 @@ struct Quantizer {
 struct BoundsInfo {
   Eigen::Vector3d min = Eigen::Vector3d::Constant(1e300), max = Eigen::Vector3d::Constant(-1e300);
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  // absolute
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // of the positions
   uint64_t count = 0;    // finite points
   uint64_t skipped = 0;  // NaN / Inf coordinates
   bool colorVaries = false;  // some two points differ in colour (constant colour is no colour)

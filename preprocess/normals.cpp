@@ -23,6 +23,7 @@ Eigen::Vector3d towardOf(const NormalOrientation& orient, size_t i, const Eigen:
     const uint16_t s = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + i * orient.scanStride);
     return s < orient.towardScanner.size() ? orient.towardScanner[s] : Eigen::Vector3d::UnitZ();
   }
+  if (orient.sheetSide.squaredNorm() > 0) return orient.sheetSide;
   return p - orient.center;
 }
 

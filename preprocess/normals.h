@@ -20,6 +20,9 @@ struct NormalOrientation {
   const uint16_t* scan = nullptr;  // per point scan index, stride `scanStride` bytes
   size_t scanStride = 0;
   Eigen::Vector3d center = Eigen::Vector3d::Zero();  // relative to the same origin as pos
+  // A cloud that is one open sheet (a wall, a field: nearly planar overall) has no outside to
+  // point away from; its normals all take this side instead (zero: not a sheet).
+  Eigen::Vector3d sheetSide = Eigen::Vector3d::Zero();
 };
 
 struct SurfaceOptions {

@@ -4,6 +4,8 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -73,6 +75,7 @@ struct PackJob {
   bool triangles = false, fileNormals = false, color = false;
   BoundsInfo bounds;
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sheetSide = Eigen::Vector3d::Zero();  // NormalOrientation::sheetSide
   Quantizer qz;
   ScratchDir scratch;
   DistributeResult dist;
@@ -129,6 +132,21 @@ void summarizeExisting(const PackReader& r, PackSummary& sum) {
 }
 
 // ---- pass 1: bounds ----
+// A cloud whose smallest extent (standard deviation) is under a tenth of the middle one is one
+// open sheet: its estimated normals all take one side, the format's up side where the sheet
+// faces it (a field, a floor), else the side of the normal's largest component (a wall). Away
+// from the centroid would split a sheet into patches facing either way (its centroid lies in it).
+Eigen::Vector3d sheetSide(const Eigen::Matrix3d& covariance, const InputSet& input) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(covariance);
+  if (!(es.eigenvalues()(0) < 0.01 * es.eigenvalues()(1))) return Eigen::Vector3d::Zero();
+  Eigen::Vector3d n = es.eigenvectors().col(0);
+  const Eigen::Vector3d up = input.files().empty() ? Eigen::Vector3d::Zero() : input.files()[0].up;
+  int big = 0;
+  n.cwiseAbs().maxCoeff(&big);
+  const double s = up.norm() > 0 && std::abs(n.dot(up.normalized())) > 0.3 ? n.dot(up) : n[big];
+  return s < 0 ? Eigen::Vector3d(-n) : n;
+}
+
 Status boundsPhase(PackJob& job) {
   const auto t0 = Clock::now();
   SA_RETURN_IF_ERROR(computeBounds(job.input, job.bounds, job.progress, job.opt.strict, true));
@@ -139,6 +157,7 @@ Status boundsPhase(PackJob& job) {
   if (job.input.anyHasColors() && !job.bounds.colorVaries)
     job.sum.warnings.push_back("every point has the same colour; the pack is shaded without colour");
   job.origin = (job.bounds.min + job.bounds.max) / 2;
+  job.sheetSide = sheetSide(job.bounds.covariance, job.input);
   const Eigen::Vector3d ext = job.bounds.max - job.bounds.min;
   job.qz.cubeSize = std::max(ext.maxCoeff() * 1.0001, std::max(1e-12, 1e-12 * job.origin.cwiseAbs().maxCoeff()));
   job.qz.cubeMin = Eigen::Vector3d::Constant(-job.qz.cubeSize / 2);
@@ -196,6 +215,7 @@ void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<dou
   NormalOrientation orient;
   orient.towardScanner = job.input.towardScanner();
   orient.center = job.bounds.centroid - job.origin;
+  orient.sheetSide = job.sheetSide;
   orient.scan = pts.empty() ? nullptr : &pts[0].scan;
   orient.scanStride = sizeof(ChunkPoint);
   SurfaceOptions so;

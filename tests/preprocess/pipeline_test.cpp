@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
+#include <Eigen/Geometry>
+
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -387,6 +390,39 @@ TEST(UpAxisReal, OrganizedPcdStandsOnItsTable) {
 
 // A sparse strip: 501 m x 5 m, 1000 points. It made a 2048^2 page (8 MB); pages now fit their
 // tiles and a point input keeps at most 8 texels per point.
+// An open sheet without normals or a scanner (a tilted, undulating wall scan): its estimated
+// normals all take one side, so every cell faces the same way and a viewer sees the whole sheet
+// from that side. Oriented away from the cloud's centroid, which lies in the sheet, the bumps
+// above and below it faced opposite ways and half the sheet was drawn from each side only.
+TEST(Pipeline, OpenSheetFacesOneWay) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  std::mt19937 rng(4);
+  std::normal_distribution<double> noise(0, 0.1);
+  std::uniform_real_distribution<double> jitter(0, 1);
+  for (int j = 0; j < 200; ++j)
+    for (int i = 0; i < 200; ++i) {
+      const double x = i + jitter(rng), y = j + jitter(rng);
+      const double h = 4 * std::sin(2 * M_PI * x / 150) * std::cos(2 * M_PI * y / 185) + noise(rng);
+      pts.push_back(R * Eigen::Vector3d(x, y, h) + Eigen::Vector3d(100, 50, 20));
+    }
+  test::writePointsPly(d.file("wall.ply"), pts, nullptr);
+  auto in = InputSet::open({d.file("wall.ply")});
+  ASSERT_TRUE(in.isOk());
+  PackSummary sum;
+  ASSERT_TRUE(packInput(*in, d.file("wall.hfa"), PackOptions{}, nullptr, sum).isOk());
+  EXPECT_TRUE(sum.normalsEstimated);
+  PackReader r;
+  ASSERT_TRUE(r.open(d.file("wall.hfa")).isOk());
+  size_t facing = 0, away = 0;
+  for (const CellRecord& c : r.cells()) (Eigen::Vector3d(c.w).dot(R.col(2)) > 0 ? facing : away) += 1;
+  std::printf("open sheet: %u cells (%u forced), %zu facing +n, %zu facing -n\n", sum.cells, sum.forcedCells, facing, away);
+  EXPECT_TRUE(facing == 0 || away == 0);
+  EXPECT_LE(sum.cells, 16u);
+  EXPECT_EQ(sum.forcedCells, 0u);
+}
+
 TEST(Pipeline, SparseStripStaysSmall) {
   test::TempDir d;
   PackSummary sum;
