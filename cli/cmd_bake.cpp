@@ -12,10 +12,10 @@ namespace sa {
 
 int cmdBake(int argc, char** argv) {
   Args a;
-  Status s = a.parse(argc, argv, {"mode", "output", "clip-box", "budget"}, {"force", "quiet", "help"},
+  Status s = a.parse(argc, argv, {"mode", "output", "clip-box", "budget", "grooves"}, {"force", "quiet", "help"},
                      {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
-    std::printf("usage: scanatlas bake PACK --mode LIST [-o OUT] [--clip-box X0,Y0,Z0,X1,Y1,Z1] [--budget SIZE] [--force]\n\n"
+    std::printf("usage: scanatlas bake PACK --mode LIST [-o OUT] [--clip-box X0,Y0,Z0,X1,Y1,Z1] [--budget SIZE] [--grooves FILE] [--force]\n\n"
                 "Bakes what the listed surface-detail modes need into the pack: their optional sections\n"
                 "(docs/FORMAT.md), checksummed like the rest. The pack is rewritten atomically (a complete\n"
                 "new file replaces it, or goes to OUT); its cells, pages and hash are unchanged. A mode whose\n"
@@ -23,6 +23,9 @@ int cmdBake(int argc, char** argv) {
                 "  --clip-box ...   vdm: only the cells whose box meets this box (world coordinates)\n"
                 "  --budget SIZE    vdm: the section's bytes never exceed SIZE (default 256M; suffixes K, M, G);\n"
                 "                   cells are taken in pack order while their worst case still fits\n"
+                "  --grooves FILE   grooves: store these (a grooves JSON: exported, edited or drawn by hand;\n"
+                "                   those with a depth as they are, the others measured in the sources' points)\n"
+                "                   instead of detecting them in the sources\n"
                 "Modes:\n");
     for (const ModeInfo& m : allModes()) std::printf("  %-9s %s\n", m.name, m.summary);
     return 0;
@@ -45,7 +48,7 @@ int cmdBake(int argc, char** argv) {
       if (!quiet) std::fprintf(stderr, "%s: needs nothing baked\n", name.c_str());
       continue;
     }
-    if (ms.present && !a.flag("force") && out == in) {
+    if (ms.present && !a.flag("force") && out == in && !(*m == RenderMode::kGrooves && a.has("grooves"))) {
       if (!quiet) std::fprintf(stderr, "%s: already baked (%.1f MiB, %.2f s); --force bakes it again\n", name.c_str(),
                                double(ms.bytes) / (1 << 20), ms.bakeSeconds);
       continue;
@@ -68,6 +71,7 @@ int cmdBake(int argc, char** argv) {
     if (*v < (1u << 16)) return reportError(Status::badInput("--budget: at least 64K"));
     req.budget = *v;
   }
+  if (a.has("grooves")) req.groovesFile = a.get("grooves");
   Progress progress(!quiet, "bake", "cells");
   req.progress = [&](uint64_t done, uint64_t total) { progress("cells", done, total); };
   std::vector<std::string> report;

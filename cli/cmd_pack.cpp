@@ -78,17 +78,20 @@ const char* kHelp =
 
 
 // Bakes the sections of `modes` the pack at `path` lacks (an up-to-date pack may hold them).
-Status bakeMissingModes(const std::string& path, const std::vector<RenderMode>& modes, bool quiet) {
+// Grooves given in a file are baked again whenever given (the file may have been edited).
+Status bakeMissingModes(const std::string& path, const std::vector<RenderMode>& modes, const BakeRequest& req, bool quiet) {
   PackReader pack;
   SA_RETURN_IF_ERROR(pack.open(path));
   std::vector<RenderMode> missing;
   for (RenderMode m : modes) {
     const ModeSection ms = modeSection(pack, m);
-    if (ms.needed && !ms.present && std::find(missing.begin(), missing.end(), m) == missing.end()) missing.push_back(m);
+    const bool again = m == RenderMode::kGrooves && !req.groovesFile.empty();
+    if (ms.needed && (!ms.present || again) && std::find(missing.begin(), missing.end(), m) == missing.end())
+      missing.push_back(m);
   }
   if (missing.empty()) return Status::ok();
   std::vector<std::string> report;
-  SA_RETURN_IF_ERROR(bakeModes(path, path, missing, report));
+  SA_RETURN_IF_ERROR(bakeModes(path, path, missing, report, req));
   if (!quiet)
     for (const std::string& r : report) std::fprintf(stderr, "baked %s\n", r.c_str());
   return Status::ok();
@@ -105,7 +108,7 @@ int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
-                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes"},
+                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves"},
                      {"as-points", "strict", "force", "no-smooth", "json", "quiet", "help"},
                      {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -191,6 +194,13 @@ int cmdPack(int argc, char** argv) {
     if (!r) return reportError(Status::badInput("--modes: " + r.status().message()));
     modes.push_back(*r);
   }
+  BakeRequest bake;
+  if (a.has("grooves")) {
+    bake.groovesFile = a.get("grooves");
+    if (!std::filesystem::is_regular_file(bake.groovesFile))
+      return reportError(Status::badInput("--grooves: " + bake.groovesFile + ": no such file"));
+    if (std::find(modes.begin(), modes.end(), RenderMode::kGrooves) == modes.end()) modes.push_back(RenderMode::kGrooves);
+  }
   opt.smooth = !a.flag("no-smooth");
   opt.asPoints = a.flag("as-points");
   opt.strict = a.flag("strict");
@@ -212,7 +222,7 @@ int cmdPack(int argc, char** argv) {
   s = packInput(*input, out, opt, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
   progress.finish();
   if (!s) return reportError(s);
-  s = bakeMissingModes(out, modes, quiet || a.flag("json"));
+  s = bakeMissingModes(out, modes, bake, quiet || a.flag("json"));
   if (!s) return reportError(s);
   for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
     if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());

@@ -68,6 +68,9 @@ GrooveSet measureGrooves(const double* pos, size_t n, const GrooveSet& given, co
 Status writeGroovesJson(const GrooveSet& set, const std::string& path);
 Status writeGroovesCsv(const GrooveSet& set, const std::string& path);
 Result<GrooveSet> readGroovesJson(const std::string& path);
+// The same JSON as text, and parsed from text (path: names the source in errors).
+std::string groovesJsonText(const GrooveSet& set);
+Result<GrooveSet> parseGroovesJson(const std::string& text, const std::string& path);
 
 // Synthetic test scans (synthetic.cpp): a tilted, gently undulating plane sampled on a jittered
 // grid of spacing `spacing` with Gaussian height noise `noise`, and grooves carved into it.

@@ -58,7 +58,7 @@ Result<Groove> parseGroove(const json& j, const std::string& where) {
 
 }  // namespace
 
-Status writeGroovesJson(const GrooveSet& set, const std::string& path) {
+std::string groovesJsonText(const GrooveSet& set) {
   json j;
   j["format"] = kFormat;
   j["version"] = kVersion;
@@ -84,7 +84,11 @@ Status writeGroovesJson(const GrooveSet& set, const std::string& path) {
     for (const auto& [x, h] : g.profile) o["profile"].push_back({x, h});
     j["grooves"].push_back(o);
   }
-  const std::string text = j.dump(1) + "\n";
+  return j.dump(1) + "\n";
+}
+
+Status writeGroovesJson(const GrooveSet& set, const std::string& path) {
+  const std::string text = groovesJsonText(set);
   return writeFileAtomic(path, text.data(), text.size());
 }
 
@@ -108,7 +112,13 @@ Status writeGroovesCsv(const GrooveSet& set, const std::string& path) {
 Result<GrooveSet> readGroovesJson(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   if (!f) return Status::badInput(path + ": cannot open");
-  json j = json::parse(f, nullptr, false);
+  std::stringstream text;
+  text << f.rdbuf();
+  return parseGroovesJson(text.str(), path);
+}
+
+Result<GrooveSet> parseGroovesJson(const std::string& text, const std::string& path) {
+  json j = json::parse(text, nullptr, false);
   if (j.is_discarded()) return Status::badInput(path + ": not valid JSON");
   if (!j.is_object() || !j.contains("grooves") || !j["grooves"].is_array())
     return Status::badInput(path + ": expected an object with a \"grooves\" array");

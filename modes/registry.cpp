@@ -7,6 +7,8 @@
 
 #include "modes/exact/exact.h"
 #include "modes/gdm/gdm.h"
+#include "modes/grooves/groove_bake.h"
+#include "modes/grooves/groove_cast.h"
 #include "modes/vdm/vdm.h"
 
 namespace sa {
@@ -94,6 +96,11 @@ const ModeInfo kModes[] = {
      "slices where it covers fewer, as many as keep them a pixel apart along the view (depth error <= sqrt(3) pixel "
      "footprints, 004 §4.1); needs nothing baked",
      nullptr, nullptr, RenderMode::kAuto, nullptr, "parallax_cast.glsl"},
+    {RenderMode::kGrooves, "grooves",
+     "cracks and joints carved into the height field from their profiles (path-based surface detail, Bosch et al.): "
+     "exact depth, facet normals, masking, shadows, anti-aliased under 2 pixels; bakes GROO from the grooves detected "
+     "in the pack's sources (or --grooves FILE); a groove neither detected nor given is never drawn",
+     gcast::kSectionId, grooves::bakeSection, RenderMode::kGrooves, "parallax", "grooves.glsl"},
     {RenderMode::kPoints, "points", "the source points as splats (the baseline; reads the pack's sources)", nullptr, nullptr,
      RenderMode::kPoints, nullptr, nullptr},
 };
@@ -135,6 +142,13 @@ ModeSection modeSection(const PackReader& pack, RenderMode m) {
     }
   } else if (m == RenderMode::kGdm) {
     auto v = gdm::readSection(pack);
+    if (v.isOk() && v->present) {
+      s.present = true;
+      s.bytes = v->bytes;
+      s.bakeSeconds = v->header.bakeSeconds;
+    }
+  } else if (m == RenderMode::kGrooves) {
+    auto v = gcast::readSection(pack);
     if (v.isOk() && v->present) {
       s.present = true;
       s.bytes = v->bytes;

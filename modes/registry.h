@@ -14,14 +14,17 @@
 
 namespace sa {
 
-enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4, kSlices = 5, kAuto = 6 };
-inline constexpr int kRenderModes = 7;
+enum class RenderMode { kParallax = 0, kExact = 1, kPoints = 2, kVdm = 3, kGdm = 4, kSlices = 5, kAuto = 6, kGrooves = 7 };
+inline constexpr int kRenderModes = 8;
 
 // What a bake may be limited to (modes that bake per cell: vdm) and how it reports progress.
 struct BakeRequest {
   bool clip = false;  // only cells whose box meets [lo, hi] (world coordinates)
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
   uint64_t budget = 0;  // bytes the section may take (0: the mode's default)
+  // grooves: a grooves JSON (edited, or drawn by hand) instead of detecting them in the sources;
+  // grooves with a depth are taken as they are, the others measured in the points.
+  std::string groovesFile;
   std::function<void(uint64_t done, uint64_t total)> progress;
 };
 

@@ -14,7 +14,7 @@ export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 alloc=max_allocation_size_mb=2048:allocator_may_return_null=1
 # Tests that create a GL context (directly or through the scanatlas binary; FarReal is
 # parameterized, so its names start with the instantiation).
-gl='^(RenderTest|Accuracy|Stress|ExactGl|VdmGl|GdmGl|SlicesGl|AutoGl|Cli|Window)\.|/FarReal\.'
+gl='^(RenderTest|Accuracy|Stress|ExactGl|VdmGl|GdmGl|SlicesGl|AutoGl|GroovesGl|Cli|Window)\.|/FarReal\.'
 # Left to the Release run (they measure accuracy, not memory safety, and take too long under
 # ASan): Vdm.OffGrid's bakes, and the gdm direction functions of the dragon's 1090 forced cells
 # (over 10 minutes; the bunny's run here).
@@ -23,4 +23,4 @@ ASAN_OPTIONS=detect_leaks=1:$alloc ctest --output-on-failure -j"${JOBS:-2}" -E "
 # Vdm.OffGrid tests (256 exact rays a texel) measure accuracy, not memory safety (meshes are
 # packed and rendered under the sanitizers by PipelineReal and the bust and sheet tests; the vdm
 # bake and lookup by Vdm.SectionKeepsItsBudgetAndRoundTrips): the Release run covers them.
-ASAN_OPTIONS=detect_leaks=0:$alloc ctest --output-on-failure -j"${JOBS:-2}" -R "$gl" -E 'DragonMeshTrianglePath|IgeaBust|ExactGl\.BunnyScansOrbit|VdmGl\.'
+ASAN_OPTIONS=detect_leaks=0:$alloc ctest --output-on-failure -j"${JOBS:-2}" -R "$gl" -E 'DragonMeshTrianglePath|IgeaBust|ExactGl\.BunnyScansOrbit|VdmGl\.|GroovesGl\.(Depth|Narrow)'

@@ -2,6 +2,7 @@
 
 #include "modes/exact/exact.h"
 #include "modes/gdm/gdm.h"
+#include "modes/grooves/groove_cast.h"
 #include "modes/vdm/vdm.h"
 
 #define GL_GLEXT_PROTOTYPES 1
@@ -122,6 +123,7 @@ struct Renderer::Gl {
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
   GLuint vdmEntryBuf = 0, vdmWordBuf = 0;            // vdm: per-cell block offsets, the blocks
   GLuint gdmEntryBuf = 0, gdmWordBuf = 0;            // gdm: per-cell block offsets, the voxel grids
+  GLuint grooveEntryBuf = 0, grooveWordBuf = 0;      // grooves: per-cell block offsets, profiles and blocks
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
   const PackReader* pack = nullptr;   // for streamed pages
@@ -149,8 +151,8 @@ struct Renderer::Gl {
     for (int m = 0; m < kRenderModes; ++m)
       for (GLuint p : {front[m], inside[m]})
         if (p) glDeleteProgram(p);
-    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf, vdmEntryBuf, vdmWordBuf, gdmEntryBuf, gdmWordBuf};
-    glDeleteBuffers(7, modeBufs);
+    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf, vdmEntryBuf, vdmWordBuf, gdmEntryBuf, gdmWordBuf, grooveEntryBuf, grooveWordBuf};
+    glDeleteBuffers(9, modeBufs);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -308,6 +310,14 @@ Status Renderer::initModes(const PackReader& pack) {
       gdmBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.gdmEntryBuf, g.gdmWordBuf);
       gpuBytes_ += gdmBytes_;
     }
+    if (mi.mode == RenderMode::kGrooves) {
+      auto v = gcast::readSection(pack);
+      if (!v.isOk()) return v.status();
+      if (!v->present) continue;  // drawn as parallax: a groove neither detected nor given is never drawn
+      grooveBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.grooveEntryBuf,
+                                  g.grooveWordBuf);
+      gpuBytes_ += grooveBytes_;
+    }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
       if (!v.isOk()) return v.status();
@@ -343,6 +353,7 @@ uint64_t Renderer::modeGpuBytes(RenderMode m) const {
   return m == RenderMode::kExact ? exactBytes_
          : m == RenderMode::kVdm ? vdmBytes_ + exactBytes_
          : m == RenderMode::kGdm ? gdmBytes_ + exactBytes_
+         : m == RenderMode::kGrooves ? grooveBytes_
                                  : 0;
 }
 
@@ -544,6 +555,12 @@ void Renderer::setCommonUniforms(GLuint p, const FrameUniforms& f, const RenderS
   glUniform1i(glGetUniformLocation(p, "countWork"), s.countWork ? 1 : 0);
   glUniform1i(glGetUniformLocation(p, "shadows"), s.shadows && !s.headLight ? 1 : 0);
   glUniform1ui(glGetUniformLocation(p, "workCap"), 0xfffffffeu);  // a cast that reports more was stopped by its cap
+  // grooves: the pixel footprint for anti-aliasing narrow grooves.
+  glUniform1f(glGetUniformLocation(p, "pixelAngle"), f.pixelAngle);
+  glUniform3fv(glGetUniformLocation(p, "camRight"), 1, f.right.data());
+  glUniform3fv(glGetUniformLocation(p, "camUp"), 1, f.camUp.data());
+  glUniform1i(glGetUniformLocation(p, "grooveAA"), s.grooveAA ? 1 : 0);
+  glUniform1i(glGetUniformLocation(p, "grooveSamples"), std::clamp(s.grooveSamples, 1, 64));
 }
 
 // The frame's camera-relative constants (differences formed in double, then float).
@@ -555,6 +572,8 @@ Renderer::FrameUniforms Renderer::frameUniforms(const Camera& cam, const RenderS
   f.rot = cam.viewRotation().cast<float>();
   f.proj = cam.projection(np).cast<float>();
   f.fwd = cam.forward().cast<float>();
+  f.right = cam.right().cast<float>();
+  f.camUp = cam.trueUp().cast<float>();
   // Height ramp range: the bounding box's corners along up.
   const Eigen::Vector3d upD = s.up.normalized();
   f.up = upD.cast<float>();
@@ -747,6 +766,9 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
              ((st.drawnMode == RenderMode::kSlices || st.drawnMode == RenderMode::kAuto) && g.gdmEntryBuf)) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);  // slices: forced cells slice gdm's voxels
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
+  } else if (st.drawnMode == RenderMode::kGrooves) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.grooveEntryBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.grooveWordBuf);
   }
 
   glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);

@@ -57,6 +57,10 @@ struct RenderSettings {
   // Self-shadowing (001 §3.2): a second cast from each hit toward the light (lightDir; needs
   // headLight off), within the hit's cell, by the mode's own cast (vdm: a lookup).
   bool shadows = false;
+  // grooves mode: grooves under two pixels wide are anti-aliased over the pixel's footprint by
+  // this many rays across them (off: one ray per pixel, as wide grooves).
+  bool grooveAA = true;
+  int grooveSamples = 8;
 };
 
 // Per-frame work of the surface casts (RenderSettings::countWork): a ray is one fragment's cast;
@@ -134,7 +138,7 @@ class Renderer {
     double nearPlane = 0;
     Eigen::Matrix3f rot;
     Eigen::Matrix4f proj;
-    Eigen::Vector3f fwd, up, light, clipLo, clipHi;
+    Eigen::Vector3f fwd, up, light, clipLo, clipHi, right, camUp;
     Eigen::Vector4f plane;
     float heightLo = 0, heightHi = 0;
     float pixelAngle = 0;  // vertical field of view over the height in pixels (radians)
@@ -158,7 +162,7 @@ class Renderer {
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
   bool hasColor_ = false, hasNormals_ = false;
-  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0;
+  uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0, grooveBytes_ = 0;
   double spacing_ = 0;
 };
 

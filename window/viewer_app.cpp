@@ -28,6 +28,7 @@
 #include "window/script.h"
 #include "common/fileio.h"
 #include "grooves/grooves.h"
+#include "modes/grooves/groove_bake.h"
 
 namespace sa {
 
@@ -518,6 +519,15 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
       std::fprintf(stderr, "scanatlas: error: %s\n", g.status().message().c_str());
       return 2;
     }
+    s.grooves = std::move(*g);
+  } else {
+    // A pack baked with grooves lists them, and draws them carved (--mode grooves) from the start.
+    Result<GrooveSet> g = grooves::packGrooves(s.pack);
+    if (!g) {
+      std::fprintf(stderr, "scanatlas: error: %s\n", g.status().message().c_str());
+      return 2;
+    }
+    if (!g->grooves.empty()) s.rs.mode = RenderMode::kGrooves;
     s.grooves = std::move(*g);
   }
   if (!opt.scriptPath.empty()) {

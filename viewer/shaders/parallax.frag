@@ -39,6 +39,9 @@ void countEvent(uint k) {
 vec3 castNormal = vec3(0.0, 0.0, 1.0);
 bool castHasNormal = false;
 
+uniform bool useColor;
+uniform vec3 baseColor;
+
 #include <mode>
 
 #ifdef FRONT_FACES
@@ -53,8 +56,6 @@ flat in vec3 vCamFrame;
 uniform float nearPlane;
 uniform bool shadows;       // self-shadowing: a second cast toward lightDir (shadowRay, the mode's unit)
 uniform vec3 viewForward;   // world forward axis of the camera
-uniform bool useColor;
-uniform vec3 baseColor;
 
 layout(location = 0) out vec4 outColor;
 layout(location = 1) out float outDepth;  // linear view depth along the forward axis
@@ -68,6 +69,9 @@ void main() {
   // Slab clip against the box [uMin,uMax] x [vMin,vMax] x [wMin,wMax].
   vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x);
   vec3 bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
+#ifdef MODE_EXTENDS_BOX
+  modeExtendBox(vCell, bmin, bmax);  // a mode whose surface reaches past the height field's box (grooves)
+#endif
   vec3 inv = 1.0 / d;
   vec3 t0 = (bmin - o) * inv, t1 = (bmax - o) * inv;
   vec3 tn = min(t0, t1), tf = max(t0, t1);
@@ -105,6 +109,10 @@ void main() {
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
   if (shadows) inShadow = shadowRay(c, vCell, hit, normalize(toFrame(c, lightDir)));
   outColor = vec4(shade(albedo, nWorld, world), 1.0);
+#ifdef MODE_POST_SHADE
+  // A mode that refines the pixel's colour over its footprint (grooves narrower than ~2 pixels).
+  outColor.rgb = modePostShade(c, vCell, o, d, tS, outColor.rgb);
+#endif
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), inShadow ? 1.0 : 0.0);
   outCell = uint(vCell) + 1u;

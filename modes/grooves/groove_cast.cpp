@@ -1,0 +1,502 @@
+#include "modes/grooves/groove_cast.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include <Eigen/Dense>
+
+#include "modes/exact/exact.h"
+
+namespace sa::gcast {
+namespace {
+
+Eigen::Vector3d toFrame(const CellRecord& c, const Eigen::Vector3d& p) {
+  const Eigen::Vector3d r = p - Eigen::Vector3d(c.origin);
+  return {r.dot(Eigen::Vector3d(c.u)), r.dot(Eigen::Vector3d(c.v)), r.dot(Eigen::Vector3d(c.w))};
+}
+
+double texelOf(const CellRecord& c) {
+  return std::min((c.box[1] - c.box[0]) / c.tileW, (c.box[3] - c.box[2]) / c.tileH);
+}
+
+Eigen::Vector2d across(const Piece& p) { return {-p.e.y(), p.e.x()}; }
+
+int gridOf(const CellRecord& c) { return std::clamp(int(std::ceil(std::max(c.tileW, c.tileH) / 16.0)), 1, kMaxGrid); }
+
+// The bin of (u, v) in a cell's grid (clamped to the grid).
+int binCoord(double x, double lo, double hi, int g) {
+  return std::clamp(int(std::floor((x - lo) / (hi - lo) * g)), 0, g - 1);
+}
+
+// The rim plane w = r0 + r1 s + r2 x of piece p from the height field at its lips (half a width
+// plus a texel to each side, at both ends and the middle); where one side has no covered lip, the
+// line's own height (wA, wB at the ends) and no cross slope.
+void fitRim(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
+  const double off = p.halfWidth + texelOf(c);
+  Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d Atb = Eigen::Vector3d::Zero();
+  int sides[2] = {0, 0};
+  for (double fs : {0.0, 0.5, 1.0})
+    for (int side = 0; side < 2; ++side) {
+      const double s = fs * p.length, x = side ? off : -off;
+      const Eigen::Vector2d q = p.a + p.e * s + across(p) * x;
+      const double h = exact::surfaceHeight(pack, c, q.x(), q.y());
+      if (std::isnan(h)) continue;
+      const Eigen::Vector3d row(1, s, x);
+      AtA += row * row.transpose();
+      Atb += row * h;
+      ++sides[side];
+    }
+  if (sides[0] > 0 && sides[1] > 0 && sides[0] + sides[1] >= 3 && std::abs(AtA.determinant()) > 1e-12 * std::pow(AtA(0, 0), 3)) {
+    const Eigen::Vector3d r = AtA.ldlt().solve(Atb);
+    if (r.allFinite()) {
+      for (int k = 0; k < 3; ++k) p.rim[k] = r[k];
+      return;
+    }
+  }
+  p.rim[0] = wA;
+  p.rim[1] = p.length > 0 ? (wB - wA) / p.length : 0;
+  p.rim[2] = 0;
+}
+
+// Whether the groove's segment A-B (frame) lies on cell c's surface: at one of a few points along
+// it inside the box, the height field is covered and within the groove's depth plus two texels.
+bool onSurface(const PackReader& pack, const CellRecord& c, const Eigen::Vector3d& A, const Eigen::Vector3d& B, double depth) {
+  const double tol = depth + 2 * texelOf(c);
+  for (int k = 0; k <= 8; ++k) {
+    const Eigen::Vector3d q = A + (B - A) * (k / 8.0);
+    if (q.x() < c.box[0] || q.x() > c.box[1] || q.y() < c.box[2] || q.y() > c.box[3]) continue;
+    const double h = exact::surfaceHeight(pack, c, q.x(), q.y());
+    if (!std::isnan(h) && std::abs(h - q.z()) <= tol) return true;
+  }
+  return false;
+}
+
+// The lowest point of piece p's floor over its capsule: the rim plane's lowest corner less the
+// profile's deepest sample.
+double lowestFloor(const Piece& p, const float* profile) {
+  const Eigen::Vector2d n = across(p);
+  double lo = std::numeric_limits<double>::infinity();
+  for (double s : {-p.halfWidth, p.length + p.halfWidth})
+    for (double x : {-p.halfWidth, p.halfWidth}) lo = std::min(lo, p.rim[0] + p.rim[1] * s + p.rim[2] * x);
+  (void)n;
+  return lo - *std::max_element(profile, profile + kProfileSamples);
+}
+
+void binPieces(const CellRecord& c, CellPieces& cp) {
+  const int g = cp.grid = gridOf(c);
+  cp.bins.assign(size_t(g) * g, {});
+  for (uint32_t i = 0; i < cp.pieces.size(); ++i) {
+    const Piece& p = cp.pieces[i];
+    const Eigen::Vector2d b = p.a + p.e * p.length;
+    const Eigen::Vector2d lo = p.a.cwiseMin(b).array() - p.halfWidth, hi = p.a.cwiseMax(b).array() + p.halfWidth;
+    const int x0 = binCoord(lo.x(), c.box[0], c.box[1], g), x1 = binCoord(hi.x(), c.box[0], c.box[1], g);
+    const int y0 = binCoord(lo.y(), c.box[2], c.box[3], g), y1 = binCoord(hi.y(), c.box[2], c.box[3], g);
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) cp.bins[size_t(y) * g + x].push_back(i);
+  }
+}
+
+}  // namespace
+
+bool profileOf(const Groove& g, float out[kProfileSamples]) {
+  if (g.shape == "gap" || !(g.width > 0)) return false;
+  const double hw = 0.5 * g.width;
+  if (g.profile.size() >= 3) {
+    // Fold the measured cross-section over the centre line: per sample radius, the mean of the
+    // two sides' linear interpolations (where a side has samples that far out).
+    std::vector<std::pair<double, double>> side[2];
+    for (const auto& [x, h] : g.profile) side[x >= 0 ? 1 : 0].push_back({std::abs(double(x)), -double(h)});  // stored as residuals: negative below the rim
+    for (auto& s : side) std::sort(s.begin(), s.end());
+    auto at = [&](const std::vector<std::pair<double, double>>& s, double r, double& v) {
+      if (s.size() < 2 || r < s.front().first - 1e-9 * hw || r > s.back().first + 1e-9 * hw) return false;
+      auto it = std::lower_bound(s.begin(), s.end(), std::make_pair(r, -std::numeric_limits<double>::infinity()));
+      if (it == s.begin()) { v = it->second; return true; }
+      if (it == s.end()) { v = s.back().second; return true; }
+      const auto& [r1, h1] = *it;
+      const auto& [r0, h0] = *(it - 1);
+      v = r1 > r0 ? h0 + (h1 - h0) * (r - r0) / (r1 - r0) : h1;
+      return true;
+    };
+    bool ok = true;
+    for (int k = 0; k < kProfileSamples && ok; ++k) {
+      const double r = hw * k / (kProfileSamples - 1);
+      double sum = 0, v = 0;
+      int n = 0;
+      for (const auto& s : side)
+        if (at(s, r, v)) sum += v, ++n;
+      if (n == 0) ok = false;
+      else out[k] = float(std::max(0.0, sum / n));
+    }
+    if (ok) {
+      out[kProfileSamples - 1] = 0;
+      return true;
+    }
+  }
+  if (!(g.depth > 0)) return false;
+  for (int k = 0; k < kProfileSamples; ++k) {
+    const double f = double(k) / (kProfileSamples - 1);
+    out[k] = float(g.shape == "U" ? g.depth * std::sqrt(std::max(0.0, 1 - f * f)) : g.depth * (1 - f));
+  }
+  out[kProfileSamples - 1] = 0;
+  return true;
+}
+
+Model buildModel(const PackReader& pack, const GrooveSet& set) {
+  Model m;
+  const auto cells = pack.cells();
+  m.cellIndex.assign(cells.size(), -1);
+  const Eigen::Vector3d origin(pack.meta().origin);
+  std::vector<CellPieces> per(cells.size());
+  for (const Groove& g : set.grooves) {
+    float prof[kProfileSamples];
+    if (g.line.size() < 2 || !profileOf(g, prof)) {
+      ++m.skipped;
+      continue;
+    }
+    const uint32_t gi = m.grooves++;
+    m.profiles.insert(m.profiles.end(), prof, prof + kProfileSamples);
+    const double hw = 0.5 * g.width, depth = *std::max_element(prof, prof + kProfileSamples);
+    bool placed = false;
+    for (uint32_t ci = 0; ci < cells.size(); ++ci) {
+      const CellRecord& c = cells[ci];
+      const double pad = hw + depth + 2 * texelOf(c);
+      for (size_t k = 0; k + 1 < g.line.size(); ++k) {
+        const Eigen::Vector3d A = toFrame(c, g.line[k] - origin), B = toFrame(c, g.line[k + 1] - origin);
+        const Eigen::Vector3d lo = A.cwiseMin(B), hi = A.cwiseMax(B);
+        if (hi.x() < c.box[0] - hw || lo.x() > c.box[1] + hw || hi.y() < c.box[2] - hw || lo.y() > c.box[3] + hw ||
+            hi.z() < c.box[4] - pad || lo.z() > c.box[5] + pad)
+          continue;
+        if (!onSurface(pack, c, A, B, depth)) continue;
+        Piece p;
+        p.a = A.head<2>();
+        const Eigen::Vector2d ab = B.head<2>() - A.head<2>();
+        p.length = ab.norm();
+        p.e = p.length > 1e-12 ? Eigen::Vector2d(ab / p.length) : Eigen::Vector2d::UnitX();
+        p.halfWidth = hw;
+        p.groove = gi;
+        fitRim(pack, c, p, A.z(), B.z());
+        per[ci].pieces.push_back(p);
+        placed = true;
+      }
+    }
+    if (!placed) ++m.skipped;
+  }
+  for (uint32_t ci = 0; ci < cells.size(); ++ci) {
+    if (per[ci].pieces.empty()) continue;
+    per[ci].cell = ci;
+    per[ci].floor = cells[ci].box[4];
+    for (const Piece& p : per[ci].pieces)
+      per[ci].floor = std::min(per[ci].floor, lowestFloor(p, &m.profiles[size_t(p.groove) * kProfileSamples]));
+    binPieces(cells[ci], per[ci]);
+    m.cellIndex[ci] = int32_t(m.cells.size());
+    m.cells.push_back(std::move(per[ci]));
+  }
+  return m;
+}
+
+ExtraSection makeSection(const PackReader& pack, const Model& m, const std::string& json, double bakeSeconds) {
+  const uint32_t cellCount = uint32_t(pack.cells().size());
+  std::vector<uint32_t> entries(cellCount, kNoEntry), words;
+  auto put = [&](float f) {
+    uint32_t u;
+    std::memcpy(&u, &f, 4);
+    words.push_back(u);
+  };
+  for (float f : m.profiles) put(f);
+  uint32_t pieces = 0;
+  for (const CellPieces& cp : m.cells) {
+    entries[cp.cell] = uint32_t(words.size());
+    const size_t blk = words.size();
+    const uint32_t g = uint32_t(cp.grid);
+    uint32_t listLen = 0;
+    for (const auto& b : cp.bins) listLen += uint32_t(b.size());
+    const uint32_t listOff = kBlockHeaderWords + 2 * g * g, pieceOff = listOff + listLen;
+    words.insert(words.end(), {g, uint32_t(cp.pieces.size()), listOff, pieceOff});
+    put(float(cp.floor) - 1e-6f * std::max(1.0f, std::abs(float(cp.floor))));
+    uint32_t start = 0;
+    for (const auto& b : cp.bins) {
+      words.insert(words.end(), {start, uint32_t(b.size())});
+      start += uint32_t(b.size());
+    }
+    for (const auto& b : cp.bins) words.insert(words.end(), b.begin(), b.end());
+    for (const Piece& p : cp.pieces) {
+      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.rim[0], p.rim[1], p.rim[2]}) put(float(v));
+      words.insert(words.end(), {p.groove * kProfileSamples, 0u, 0u});
+    }
+    pieces += uint32_t(cp.pieces.size());
+    (void)blk;
+  }
+  SectionHeader h{};
+  h.version = kSectionVersion;
+  h.cellCount = cellCount;
+  h.grooveCount = m.grooves;
+  h.pieceCount = pieces;
+  h.bakeSeconds = bakeSeconds;
+  h.wordCount = words.size();
+  h.jsonBytes = json.size();
+  h.profileSamples = kProfileSamples;
+  ExtraSection s;
+  std::memcpy(s.id, kSectionId, 4);
+  s.bytes.resize(sizeof(h) + entries.size() * 4 + words.size() * 4 + json.size());
+  uint8_t* o = s.bytes.data();
+  std::memcpy(o, &h, sizeof(h));
+  std::memcpy(o + sizeof(h), entries.data(), entries.size() * 4);
+  if (!words.empty()) std::memcpy(o + sizeof(h) + entries.size() * 4, words.data(), words.size() * 4);
+  if (!json.empty()) std::memcpy(o + sizeof(h) + (entries.size() + words.size()) * 4, json.data(), json.size());
+  return s;
+}
+
+Result<SectionView> readSection(const PackReader& pack) {
+  SectionView v;
+  const auto bytes = pack.section(kSectionId);
+  if (bytes.empty()) return v;
+  const std::string where = pack.path() + ": section GROO: ";
+  if (bytes.size() < sizeof(SectionHeader)) return Status::badInput(where + "shorter than its header");
+  std::memcpy(&v.header, bytes.data(), sizeof(SectionHeader));
+  const SectionHeader& h = v.header;
+  if (h.version != kSectionVersion)
+    return Status::badInput(where + "version " + std::to_string(h.version) + " (this scanatlas reads " +
+                            std::to_string(kSectionVersion) + "); bake it again: scanatlas bake PACK --mode grooves");
+  if (h.cellCount != pack.cells().size()) return Status::badInput(where + "made for another cell table; bake it again");
+  if (h.profileSamples != kProfileSamples) return Status::badInput(where + "profiles of " + std::to_string(h.profileSamples) + " samples");
+  const uint64_t body = bytes.size() - sizeof(SectionHeader);
+  if (h.wordCount > body / 4 || uint64_t(h.cellCount) * 4 > body - h.wordCount * 4 ||
+      h.jsonBytes != body - h.wordCount * 4 - uint64_t(h.cellCount) * 4)
+    return Status::badInput(where + "sizes do not add up to the section's " + std::to_string(bytes.size()) + " bytes");
+  if (uint64_t(h.grooveCount) * kProfileSamples > h.wordCount) return Status::badInput(where + "profiles past its words");
+  v.entries = reinterpret_cast<const uint32_t*>(bytes.data() + sizeof(SectionHeader));
+  v.words = v.entries + h.cellCount;
+  // Every block inside the words, with its bins, lists and pieces (the shader trusts them).
+  const uint64_t W = h.wordCount;
+  for (uint32_t i = 0; i < h.cellCount; ++i) {
+    const uint32_t b = v.entries[i];
+    if (b == kNoEntry) continue;
+    if (uint64_t(b) + kBlockHeaderWords > W) return Status::badInput(where + "cell " + std::to_string(i) + "'s block is past the words");
+    const uint32_t g = v.words[b], n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
+    if (g < 1 || g > kMaxGrid || lo != kBlockHeaderWords + 2 * g * g || po < lo || uint64_t(b) + po + uint64_t(n) * kPieceWords > W)
+      return Status::badInput(where + "cell " + std::to_string(i) + "'s block is malformed");
+    for (uint32_t k = 0; k < g * g; ++k) {
+      const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];
+      if (uint64_t(s) + cnt > po - lo) return Status::badInput(where + "cell " + std::to_string(i) + ": a bin's list is past its block");
+      for (uint32_t q = 0; q < cnt; ++q)
+        if (v.words[b + lo + s + q] >= n) return Status::badInput(where + "cell " + std::to_string(i) + ": a bin names a piece it lacks");
+    }
+    for (uint32_t q = 0; q < n; ++q)
+      if (uint64_t(v.words[b + po + q * kPieceWords + 9]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
+        return Status::badInput(where + "cell " + std::to_string(i) + ": a piece names a profile it lacks");
+  }
+  v.json.assign(reinterpret_cast<const char*>(v.words + W), h.jsonBytes);
+  v.present = true;
+  v.bytes = bytes.size();
+  return v;
+}
+
+Model modelFromSection(const PackReader& pack, const SectionView& v) {
+  Model m;
+  if (!v.present) return m;
+  auto f = [&](uint64_t w) {
+    float x;
+    std::memcpy(&x, &v.words[w], 4);
+    return double(x);
+  };
+  m.grooves = v.header.grooveCount;
+  for (uint64_t k = 0; k < uint64_t(m.grooves) * kProfileSamples; ++k) m.profiles.push_back(float(f(k)));
+  m.cellIndex.assign(pack.cells().size(), -1);
+  for (uint32_t i = 0; i < v.header.cellCount; ++i) {
+    const uint32_t b = v.entries[i];
+    if (b == kNoEntry) continue;
+    CellPieces cp;
+    cp.cell = i;
+    cp.grid = int(v.words[b]);
+    const uint32_t n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
+    cp.floor = f(b + 4);
+    cp.bins.resize(size_t(cp.grid) * cp.grid);
+    for (size_t k = 0; k < cp.bins.size(); ++k) {
+      const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];
+      cp.bins[k].assign(v.words + b + lo + s, v.words + b + lo + s + cnt);
+    }
+    for (uint32_t q = 0; q < n; ++q) {
+      const uint64_t w = uint64_t(b) + po + uint64_t(q) * kPieceWords;
+      Piece p;
+      p.a = {f(w), f(w + 1)};
+      p.e = {f(w + 2), f(w + 3)};
+      p.length = f(w + 4);
+      p.halfWidth = f(w + 5);
+      for (int k = 0; k < 3; ++k) p.rim[k] = f(w + 6 + k);
+      p.groove = v.words[w + 9] / kProfileSamples;
+      cp.pieces.push_back(p);
+    }
+    m.cellIndex[i] = int32_t(m.cells.size());
+    m.cells.push_back(std::move(cp));
+  }
+  return m;
+}
+
+// --- the cast ---
+
+double pieceDistance(const Piece& p, const Eigen::Vector2d& q, double& s, double& x) {
+  const Eigen::Vector2d r = q - p.a;
+  s = r.dot(p.e);
+  x = r.dot(across(p));
+  const double sc = std::clamp(s, 0.0, p.length);
+  return (r - p.e * sc).norm();
+}
+
+double profileDepth(const float* profile, double r, double halfWidth, double* slope) {
+  if (slope) *slope = 0;
+  if (!(r < halfWidth)) return 0;
+  const double f = std::max(r, 0.0) / halfWidth * (kProfileSamples - 1);
+  const int k = std::min(int(f), kProfileSamples - 2);
+  const double a = f - k, d0 = profile[k], d1 = profile[k + 1];
+  if (slope) *slope = (d1 - d0) * (kProfileSamples - 1) / halfWidth;
+  return d0 + (d1 - d0) * a;
+}
+
+double pieceFloor(const Model& m, const Piece& p, const Eigen::Vector2d& q, Eigen::Vector2d* gradient) {
+  double s, x;
+  const double r = pieceDistance(p, q, s, x);
+  double slope = 0;
+  const double D = profileDepth(&m.profiles[size_t(p.groove) * kProfileSamples], r, p.halfWidth, &slope);
+  if (gradient) {
+    Eigen::Vector2d g = p.e * p.rim[1] + across(p) * p.rim[2];
+    if (r > 0 && D > 0) {
+      const Eigen::Vector2d c = p.a + p.e * std::clamp(s, 0.0, p.length);
+      g -= slope * (q - c) / r;
+    }
+    *gradient = g;
+  }
+  return p.rim[0] + p.rim[1] * s + p.rim[2] * x - D;
+}
+
+namespace {
+
+// Where the 2-D line q + t dq (at t, inside the capsule) leaves piece p's capsule.
+double capsuleExit(const Piece& p, const Eigen::Vector2d& q, const Eigen::Vector2d& dq, double t) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const double hw = p.halfWidth;
+  double exit = -inf;
+  // The body: s in [0, L], |x| < hw.
+  const Eigen::Vector2d n = across(p);
+  const double s0 = (q - p.a).dot(p.e), sd = dq.dot(p.e), x0 = (q - p.a).dot(n), xd = dq.dot(n);
+  auto slab = [&](double v0, double vd, double lo, double hi, double& tin, double& tout) {
+    if (std::abs(vd) < 1e-300) {
+      if (v0 < lo || v0 > hi) tin = inf, tout = -inf;
+      return;
+    }
+    double a = (lo - v0) / vd, b = (hi - v0) / vd;
+    if (a > b) std::swap(a, b);
+    tin = std::max(tin, a);
+    tout = std::min(tout, b);
+  };
+  double tin = -inf, tout = inf;
+  slab(s0, sd, 0, p.length, tin, tout);
+  slab(x0, xd, -hw, hw, tin, tout);
+  if (tin < tout) exit = std::max(exit, tout);
+  for (const Eigen::Vector2d& c : {p.a, Eigen::Vector2d(p.a + p.e * p.length)}) {
+    const Eigen::Vector2d r = q - c;
+    const double A = dq.squaredNorm(), B = r.dot(dq), C = r.squaredNorm() - hw * hw;
+    if (A < 1e-300) {
+      if (C < 0) exit = inf;
+      continue;
+    }
+    const double disc = B * B - A * C;
+    if (disc <= 0) continue;
+    exit = std::max(exit, (-B + std::sqrt(disc)) / A);
+  }
+  return t + std::max(exit, 0.0);
+}
+
+}  // namespace
+
+double airExit(const Model& m, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t, double t1) {
+  const Eigen::Vector3d q0 = o + d * t;
+  const double te = capsuleExit(p, q0.head<2>(), d.head<2>(), 0.0) + t;
+  const double tEnd = std::min(te, t1);
+  auto f = [&](double tt) {
+    const Eigen::Vector3d q = o + d * tt;
+    return q.z() - pieceFloor(m, p, q.head<2>());
+  };
+  constexpr int kSteps = 16;
+  double ta = t, fa = f(t);
+  for (int i = 1; i <= kSteps; ++i) {
+    double tb = t + (tEnd - t) * i / kSteps, fb = f(tb);
+    if (fb <= 0) {
+      for (int k = 0; k < 20; ++k) {
+        const double tm = 0.5 * (ta + tb), fm = f(tm);
+        if (fm > 0) ta = tm, fa = fm;
+        else tb = tm, fb = fm;
+      }
+      const double ts = fa > fb ? ta + (tb - ta) * fa / (fa - fb) : tb;
+      return f(ts) <= 0 ? ts : tb;
+    }
+    ta = tb;
+    fa = fb;
+  }
+  // Out of the capsule (a hair past its edge, so the point is outside) or at the box's end.
+  return te < t1 ? te + 1e-9 * std::max(1.0, std::abs(te)) + 1e-6 * p.halfWidth : t1;
+}
+
+int airPiece(const Model& m, const CellPieces& cp, const CellRecord& c, const Eigen::Vector3d& q) {
+  const int g = cp.grid;
+  const int bx = binCoord(q.x(), c.box[0], c.box[1], g), by = binCoord(q.y(), c.box[2], c.box[3], g);
+  for (uint32_t i : cp.bins[size_t(by) * g + bx]) {
+    const Piece& p = cp.pieces[i];
+    double s, x;
+    if (pieceDistance(p, q.head<2>(), s, x) >= p.halfWidth) continue;
+    if (q.z() > pieceFloor(m, p, q.head<2>())) return int(i);
+  }
+  return -1;
+}
+
+bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, uint32_t cell, const Eigen::Vector3d& o,
+                 const Eigen::Vector3d& d, double t0, double t1, CastResult& out) {
+  const CellPieces* cp = m.find(cell);
+  out = CastResult{};
+  if (!cp) {
+    double th;
+    if (!exact::traceCellLinear(pack, c, o, d, t0, t1, th)) return false;
+    out.t = th;
+    return true;
+  }
+  const double eps = 1e-3 * texelOf(c);
+  double t = t0;
+  int last = -2;  // -1: arrived by the height field's cast; >= 0: by leaving that piece's air
+  for (uint32_t it = 0; it < 64; ++it) {
+    out.iterations = it + 1;
+    const Eigen::Vector3d q = o + d * t;
+    const int pi = airPiece(m, *cp, c, q);
+    if (pi >= 0) {
+      t = airExit(m, cp->pieces[size_t(pi)], o, d, t, t1);
+      if (t >= t1) return false;
+      last = pi;
+      continue;
+    }
+    if (last == -1) break;
+    if (last >= 0) {
+      const double h = exact::surfaceHeight(pack, c, q.x(), q.y());
+      if (!std::isnan(h) && q.z() <= h + eps) break;
+    }
+    double th;
+    if (!exact::traceCellLinear(pack, c, o, d, t, t1, th)) return false;
+    t = th;
+    last = -1;
+  }
+  out.t = t;
+  if (last >= 0) {
+    const Piece& p = cp->pieces[size_t(last)];
+    const Eigen::Vector3d q = o + d * t;
+    double s, x;
+    if (pieceDistance(p, q.head<2>(), s, x) < p.halfWidth) {
+      Eigen::Vector2d g;
+      pieceFloor(m, p, q.head<2>(), &g);
+      out.piece = last;
+      out.normal = Eigen::Vector3d(-g.x(), -g.y(), 1).normalized();
+    }
+  }
+  return true;
+}
+
+}  // namespace sa::gcast

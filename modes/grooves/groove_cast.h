@@ -1,0 +1,126 @@
+// The `grooves` mode's core (MODES.md §4; seed 003 §3-5 and Bosch & Patow's real-time form),
+// GL-free: grooves (detected in the raw points or given, grooves/grooves.h) become per-cell
+// pieces - one straight piece of a centre line in the cell's frame, a rim plane fitted to the
+// height field at the groove's lips, and the groove's cross-section profile - binned in a uniform
+// grid over the cell's tile, and the cast that carves them into the height field.
+//
+// The carved surface is min(h, floor_1, ..., floor_n): h the cell's height field, floor_i the
+// rim plane of piece i less its profile depth D(r) at r, the distance to the piece's segment,
+// wherever r < the half width (a capsule: ends are rounded, joints and crossings are the union
+// of the grooves' air). The cast (castGrooved) finds the first point along the ray that is under
+// every one of them: from the entry it advances through the air of whatever piece the ray is in
+// (to the piece's floor or out of its capsule), re-casts the height field where the ray is above
+// it, and stops where neither moves it. A groove that was neither detected nor given is never
+// drawn: cells without pieces cast their height field alone.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "atlas/pack_file.h"
+#include "common/error.h"
+#include "grooves/grooves.h"
+
+namespace sa::gcast {
+
+// Profile depth samples per groove: D at r = k / (kProfileSamples - 1) half widths, k = 0..8
+// (the last is 0: the rim), linear in between.
+inline constexpr int kProfileSamples = 9;
+inline constexpr int kPieceWords = 12;
+inline constexpr int kBlockHeaderWords = 5;  // grid, pieces, lists' word, pieces' word, floor (f32)
+inline constexpr int kMaxGrid = 32;
+
+struct Piece {
+  Eigen::Vector2d a = Eigen::Vector2d::Zero(), e = Eigen::Vector2d::UnitX();  // start and unit direction (u, v)
+  double length = 0, halfWidth = 0;
+  // The rim: w = rim[0] + rim[1] s + rim[2] x, s along e from a, x along (-e.y, e.x).
+  double rim[3] = {0, 0, 0};
+  uint32_t groove = 0;  // its profile
+};
+
+struct CellPieces {
+  uint32_t cell = 0;
+  int grid = 1;                              // grid x grid bins over the cell's (u, v) box
+  // The lowest w the carved surface reaches over the cell's box (at most its wMin): the cast
+  // runs down to it (the grooves cut below the height field's box).
+  double floor = 0;
+  std::vector<Piece> pieces;
+  std::vector<std::vector<uint32_t>> bins;   // grid * grid lists of piece indices (row-major, u fastest)
+};
+
+struct Model {
+  std::vector<float> profiles;               // kProfileSamples per groove, frame (world) units
+  std::vector<CellPieces> cells;             // only cells with pieces, in cell order
+  std::vector<int32_t> cellIndex;            // per pack cell: index into cells, -1 when none
+  uint32_t grooves = 0, skipped = 0;         // skipped: grooves that met no cell's surface
+  const CellPieces* find(uint32_t cell) const {
+    return cell < cellIndex.size() && cellIndex[cell] >= 0 ? &cells[size_t(cellIndex[cell])] : nullptr;
+  }
+};
+
+// The profile of a groove as kProfileSamples depths over r in [0, half width]: its measured
+// cross-section (Groove::profile: residuals, negative below the rim) folded over the centre line (both sides averaged), else its shape (V: linear,
+// U: a semi-ellipse) from width and depth. Gaps (no points inside, depth unknown) get none.
+bool profileOf(const Groove& g, float out[kProfileSamples]);
+
+// Pieces of every groove in every cell whose surface it lies on (the groove's line within its
+// depth plus two texels of the cell's height field), rim planes from the height field at the
+// lips (half a width plus a texel to each side; the line's own height where a lip is uncovered).
+Model buildModel(const PackReader& pack, const GrooveSet& set);
+
+// The pack section `GROO` (docs/FORMAT.md): the model and the groove set's JSON (so `view` and
+// `info` list the grooves a pack draws).
+inline constexpr char kSectionId[4] = {'G', 'R', 'O', 'O'};
+inline constexpr uint32_t kSectionVersion = 1;
+inline constexpr uint32_t kNoEntry = 0xffffffffu;
+struct SectionHeader {
+  uint32_t version, cellCount, grooveCount, pieceCount;
+  double bakeSeconds;
+  uint64_t wordCount;   // words after the entry table: profiles, then the cells' blocks
+  uint64_t jsonBytes;   // the groove set as JSON, after the words
+  uint32_t profileSamples, zero0;
+  uint8_t zero[16];
+};
+static_assert(sizeof(SectionHeader) == 64);
+
+ExtraSection makeSection(const PackReader& pack, const Model& m, const std::string& json, double bakeSeconds);
+
+struct SectionView {
+  bool present = false;
+  SectionHeader header{};
+  const uint32_t* entries = nullptr;  // per cell: its block's first word, kNoEntry when none
+  const uint32_t* words = nullptr;
+  std::string json;
+  uint64_t bytes = 0;
+};
+Result<SectionView> readSection(const PackReader& pack);
+Model modelFromSection(const PackReader& pack, const SectionView& v);
+
+// --- the cast (the shader's grooves.glsl in double) ---
+
+// Distance from (u, v) to the piece's segment; s, x: the point's coordinates along and across.
+double pieceDistance(const Piece& p, const Eigen::Vector2d& q, double& s, double& x);
+// The profile depth at r (0 at and past the half width); slope: dD/dr.
+double profileDepth(const float* profile, double r, double halfWidth, double* slope = nullptr);
+// floor_i at (u, v) (the rim where r >= half width); gradient: d floor / d(u, v).
+double pieceFloor(const Model& m, const Piece& p, const Eigen::Vector2d& q, Eigen::Vector2d* gradient = nullptr);
+// Where the ray o + t d, inside piece p's air at t, leaves it: a point on or under its floor
+// (f <= 0), or just out of its capsule, at most t1.
+double airExit(const Model& m, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t, double t1);
+// The first piece of cell cp in whose air frame point q lies, -1 when none.
+int airPiece(const Model& m, const CellPieces& cp, const CellRecord& c, const Eigen::Vector3d& q);
+
+struct CastResult {
+  double t = 0;
+  int piece = -1;  // the piece whose floor was hit (its facet shades), -1: the height field
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // frame, when piece >= 0
+  uint32_t iterations = 0;
+};
+// First point of o + t d over [t0, t1] under the carved surface (cell c, frame coordinates);
+// the height field by the exact traversal without pyramid (exact::traceCellLinear).
+bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, uint32_t cell, const Eigen::Vector3d& o,
+                 const Eigen::Vector3d& d, double t0, double t1, CastResult& out);
+
+}  // namespace sa::gcast
