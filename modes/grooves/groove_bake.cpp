@@ -1,5 +1,6 @@
 #include "modes/grooves/groove_bake.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -80,14 +81,22 @@ Result<ExtraSection> bakeSection(const PackReader& pack, const BakeRequest& req,
   gcast::Model m = gcast::buildModel(pack, *set);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ExtraSection s = gcast::makeSection(pack, m, groovesJsonText(*set), seconds);
-  size_t pieces = 0;
-  for (const auto& c : m.cells) pieces += c.pieces.size();
+  size_t pieces = 0, bins = 0, used = 0, entries = 0, most = 0;
+  for (const auto& c : m.cells) {
+    pieces += c.pieces.size();
+    bins += c.bins.size();
+    for (const auto& b : c.bins) {
+      used += !b.empty();
+      entries += b.size();
+      most = std::max(most, b.size());
+    }
+  }
   char line[512];
   std::snprintf(line, sizeof(line),
                 "grooves: section GROO, %.1f KiB, %zu grooves (%s), %u drawn, %u not drawn (gaps of unknown depth, or on no "
-                "cell's surface); %zu pieces in %zu cells, in %.2f s",
-                double(s.bytes.size()) / 1024, set->grooves.size(), how.c_str(), m.grooves, m.skipped, pieces,
-                m.cells.size(), seconds);
+                "cell's surface); %zu pieces in %zu cells (%zu of %zu bins hold pieces, %.1f on average, at most %zu), in %.2f s",
+                double(s.bytes.size()) / 1024, set->grooves.size(), how.c_str(), m.drawn, m.skipped, pieces,
+                m.cells.size(), used, bins, used ? double(entries) / double(used) : 0.0, most, seconds);
   summary = line;
   return s;
 }

@@ -23,42 +23,27 @@ double texelOf(const CellRecord& c) {
 
 Eigen::Vector2d across(const Piece& p) { return {-p.e.y(), p.e.x()}; }
 
-int gridOf(const CellRecord& c) { return std::clamp(int(std::ceil(std::max(c.tileW, c.tileH) / 16.0)), 1, kMaxGrid); }
+int gridOf(const CellRecord& c) { return std::clamp(int(std::ceil(std::max(c.tileW, c.tileH) / 8.0)), 1, kMaxGrid); }
 
 // The bin of (u, v) in a cell's grid (clamped to the grid).
 int binCoord(double x, double lo, double hi, int g) {
   return std::clamp(int(std::floor((x - lo) / (hi - lo) * g)), 0, g - 1);
 }
 
-// The rim plane w = r0 + r1 s + r2 x of piece p from the height field at its lips (half a width
-// plus a texel to each side, at both ends and the middle); where one side has no covered lip, the
-// line's own height (wA, wB at the ends) and no cross slope.
-void fitRim(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
-  const double off = p.halfWidth + texelOf(c);
-  Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d Atb = Eigen::Vector3d::Zero();
-  int sides[2] = {0, 0};
-  for (double fs : {0.0, 0.5, 1.0})
-    for (int side = 0; side < 2; ++side) {
-      const double s = fs * p.length, x = side ? off : -off;
-      const Eigen::Vector2d q = p.a + p.e * s + across(p) * x;
-      const double h = exact::surfaceHeight(pack, c, q.x(), q.y());
-      if (std::isnan(h)) continue;
-      const Eigen::Vector3d row(1, s, x);
-      AtA += row * row.transpose();
-      Atb += row * h;
-      ++sides[side];
-    }
-  if (sides[0] > 0 && sides[1] > 0 && sides[0] + sides[1] >= 3 && std::abs(AtA.determinant()) > 1e-12 * std::pow(AtA(0, 0), 3)) {
-    const Eigen::Vector3d r = AtA.ldlt().solve(Atb);
-    if (r.allFinite()) {
-      for (int k = 0; k < 3; ++k) p.rim[k] = r[k];
-      return;
-    }
+// Piece p's lips from the height field (wA, wB: the line's own heights at its ends).
+void measureLips(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
+  p.lip = p.halfWidth + texelOf(c);
+  const Eigen::Vector2d n = across(p);
+  for (int end = 0; end < 2; ++end) {
+    const Eigen::Vector2d base = p.a + p.e * (end ? p.length : 0.0);
+    const Eigen::Vector2d l = base - n * p.lip, r = base + n * p.lip;
+    double hl = exact::surfaceHeight(pack, c, l.x(), l.y()), hr = exact::surfaceHeight(pack, c, r.x(), r.y());
+    if (std::isnan(hl) && std::isnan(hr)) hl = hr = end ? wB : wA;
+    else if (std::isnan(hl)) hl = hr;
+    else if (std::isnan(hr)) hr = hl;
+    p.lips[2 * end] = hl;
+    p.lips[2 * end + 1] = hr;
   }
-  p.rim[0] = wA;
-  p.rim[1] = p.length > 0 ? (wB - wA) / p.length : 0;
-  p.rim[2] = 0;
 }
 
 // Whether the groove's segment A-B (frame) lies on cell c's surface: at one of a few points along
@@ -74,15 +59,10 @@ bool onSurface(const PackReader& pack, const CellRecord& c, const Eigen::Vector3
   return false;
 }
 
-// The lowest point of piece p's floor over its capsule: the rim plane's lowest corner less the
-// profile's deepest sample.
+// The lowest point of piece p's floor over its capsule: its lowest lip less the profile's deepest
+// sample.
 double lowestFloor(const Piece& p, const float* profile) {
-  const Eigen::Vector2d n = across(p);
-  double lo = std::numeric_limits<double>::infinity();
-  for (double s : {-p.halfWidth, p.length + p.halfWidth})
-    for (double x : {-p.halfWidth, p.halfWidth}) lo = std::min(lo, p.rim[0] + p.rim[1] * s + p.rim[2] * x);
-  (void)n;
-  return lo - *std::max_element(profile, profile + kProfileSamples);
+  return *std::min_element(p.lips, p.lips + 4) - *std::max_element(profile, profile + kProfileSamples);
 }
 
 void binPieces(const CellRecord& c, CellPieces& cp) {
@@ -94,8 +74,15 @@ void binPieces(const CellRecord& c, CellPieces& cp) {
     const Eigen::Vector2d lo = p.a.cwiseMin(b).array() - p.halfWidth, hi = p.a.cwiseMax(b).array() + p.halfWidth;
     const int x0 = binCoord(lo.x(), c.box[0], c.box[1], g), x1 = binCoord(hi.x(), c.box[0], c.box[1], g);
     const int y0 = binCoord(lo.y(), c.box[2], c.box[3], g), y1 = binCoord(hi.y(), c.box[2], c.box[3], g);
+    // Only bins the capsule reaches: the bin's centre within the half width plus half the bin's
+    // diagonal of the segment (a long diagonal piece's box holds many bins it never touches).
+    const double bw = (c.box[1] - c.box[0]) / g, bh = (c.box[3] - c.box[2]) / g, reach = p.halfWidth + 0.5 * std::hypot(bw, bh);
     for (int y = y0; y <= y1; ++y)
-      for (int x = x0; x <= x1; ++x) cp.bins[size_t(y) * g + x].push_back(i);
+      for (int x = x0; x <= x1; ++x) {
+        const Eigen::Vector2d centre(c.box[0] + (x + 0.5) * bw, c.box[2] + (y + 0.5) * bh);
+        double s, xx;
+        if (pieceDistance(p, centre, s, xx) <= reach) cp.bins[size_t(y) * g + x].push_back(i);
+      }
   }
 }
 
@@ -170,26 +157,35 @@ Model buildModel(const PackReader& pack, const GrooveSet& set) {
             hi.z() < c.box[4] - pad || lo.z() > c.box[5] + pad)
           continue;
         if (!onSurface(pack, c, A, B, depth)) continue;
-        Piece p;
-        p.a = A.head<2>();
-        const Eigen::Vector2d ab = B.head<2>() - A.head<2>();
-        p.length = ab.norm();
-        p.e = p.length > 1e-12 ? Eigen::Vector2d(ab / p.length) : Eigen::Vector2d::UnitX();
-        p.halfWidth = hw;
-        p.groove = gi;
-        fitRim(pack, c, p, A.z(), B.z());
-        per[ci].pieces.push_back(p);
+        // Pieces of at most kMaxPieceTexels, so the lips follow the surface.
+        const int parts = std::clamp(int(std::ceil((B - A).head<2>().norm() / (kMaxPieceTexels * texelOf(c)))), 1, 4096);
+        for (int k2 = 0; k2 < parts; ++k2) {
+          const Eigen::Vector3d P = A + (B - A) * (double(k2) / parts), Q = A + (B - A) * (double(k2 + 1) / parts);
+          Piece p;
+          p.a = P.head<2>();
+          const Eigen::Vector2d ab = Q.head<2>() - P.head<2>();
+          p.length = ab.norm();
+          p.e = p.length > 1e-12 ? Eigen::Vector2d(ab / p.length) : Eigen::Vector2d::UnitX();
+          p.halfWidth = hw;
+          p.groove = gi;
+          measureLips(pack, c, p, P.z(), Q.z());
+          per[ci].pieces.push_back(p);
+        }
         placed = true;
       }
     }
-    if (!placed) ++m.skipped;
+    if (placed) ++m.drawn;
+    else ++m.skipped;
   }
   for (uint32_t ci = 0; ci < cells.size(); ++ci) {
     if (per[ci].pieces.empty()) continue;
     per[ci].cell = ci;
     per[ci].floor = cells[ci].box[4];
-    for (const Piece& p : per[ci].pieces)
-      per[ci].floor = std::min(per[ci].floor, lowestFloor(p, &m.profiles[size_t(p.groove) * kProfileSamples]));
+    for (const Piece& p : per[ci].pieces) {
+      const float* prof = &m.profiles[size_t(p.groove) * kProfileSamples];
+      per[ci].floor = std::min({per[ci].floor, lowestFloor(p, prof), cells[ci].box[4] - *std::max_element(prof, prof + kProfileSamples)});
+      per[ci].deepest = std::max(per[ci].deepest, double(*std::max_element(prof, prof + kProfileSamples)));
+    }
     binPieces(cells[ci], per[ci]);
     m.cellIndex[ci] = int32_t(m.cells.size());
     m.cells.push_back(std::move(per[ci]));
@@ -216,6 +212,7 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
     const uint32_t listOff = kBlockHeaderWords + 2 * g * g, pieceOff = listOff + listLen;
     words.insert(words.end(), {g, uint32_t(cp.pieces.size()), listOff, pieceOff});
     put(float(cp.floor) - 1e-6f * std::max(1.0f, std::abs(float(cp.floor))));
+    put(float(cp.deepest));
     uint32_t start = 0;
     for (const auto& b : cp.bins) {
       words.insert(words.end(), {start, uint32_t(b.size())});
@@ -223,8 +220,10 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
     }
     for (const auto& b : cp.bins) words.insert(words.end(), b.begin(), b.end());
     for (const Piece& p : cp.pieces) {
-      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.rim[0], p.rim[1], p.rim[2]}) put(float(v));
-      words.insert(words.end(), {p.groove * kProfileSamples, 0u, 0u});
+      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.lips[0], p.lips[1], p.lips[2], p.lips[3]})
+        put(float(v));
+      words.push_back(p.groove * kProfileSamples);
+      put(float(p.lip));
     }
     pieces += uint32_t(cp.pieces.size());
     (void)blk;
@@ -285,7 +284,7 @@ Result<SectionView> readSection(const PackReader& pack) {
         if (v.words[b + lo + s + q] >= n) return Status::badInput(where + "cell " + std::to_string(i) + ": a bin names a piece it lacks");
     }
     for (uint32_t q = 0; q < n; ++q)
-      if (uint64_t(v.words[b + po + q * kPieceWords + 9]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
+      if (uint64_t(v.words[b + po + q * kPieceWords + 10]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
         return Status::badInput(where + "cell " + std::to_string(i) + ": a piece names a profile it lacks");
   }
   v.json.assign(reinterpret_cast<const char*>(v.words + W), h.jsonBytes);
@@ -313,6 +312,7 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
     cp.grid = int(v.words[b]);
     const uint32_t n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
     cp.floor = f(b + 4);
+    cp.deepest = f(b + 5);
     cp.bins.resize(size_t(cp.grid) * cp.grid);
     for (size_t k = 0; k < cp.bins.size(); ++k) {
       const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];
@@ -325,8 +325,9 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
       p.e = {f(w + 2), f(w + 3)};
       p.length = f(w + 4);
       p.halfWidth = f(w + 5);
-      for (int k = 0; k < 3; ++k) p.rim[k] = f(w + 6 + k);
-      p.groove = v.words[w + 9] / kProfileSamples;
+      for (int k = 0; k < 4; ++k) p.lips[k] = f(w + 6 + k);
+      p.groove = v.words[w + 10] / kProfileSamples;
+      p.lip = f(w + 11);
       cp.pieces.push_back(p);
     }
     m.cellIndex[i] = int32_t(m.cells.size());
@@ -355,20 +356,36 @@ double profileDepth(const float* profile, double r, double halfWidth, double* sl
   return d0 + (d1 - d0) * a;
 }
 
-double pieceFloor(const Model& m, const Piece& p, const Eigen::Vector2d& q, Eigen::Vector2d* gradient) {
+double HeightField::operator()(double u, double v) const { return exact::surfaceHeight(*pack, *cell, u, v); }
+double HeightField::texel() const { return texelOf(*cell); }
+
+double pieceRim(const Piece& p, double s, double x, double* slopeAlong, double* slopeAcross) {
+  const double fs = p.length > 0 ? std::clamp(s / p.length, 0.0, 1.0) : 0.0, fx = (x + p.lip) / (2 * p.lip);
+  const double l = p.lips[0] + (p.lips[2] - p.lips[0]) * fs, r = p.lips[1] + (p.lips[3] - p.lips[1]) * fs;
+  if (slopeAcross) *slopeAcross = (r - l) / (2 * p.lip);
+  if (slopeAlong) {
+    const double a0 = p.lips[0] + (p.lips[1] - p.lips[0]) * fx, a1 = p.lips[2] + (p.lips[3] - p.lips[2]) * fx;
+    *slopeAlong = p.length > 0 && s > 0 && s < p.length ? (a1 - a0) / p.length : 0.0;
+  }
+  return l + (r - l) * fx;
+}
+
+double pieceFloor(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector2d& q, Eigen::Vector2d* gradient) {
+  (void)h;
   double s, x;
   const double r = pieceDistance(p, q, s, x);
-  double slope = 0;
+  double slope = 0, along = 0, across_ = 0;
   const double D = profileDepth(&m.profiles[size_t(p.groove) * kProfileSamples], r, p.halfWidth, &slope);
+  const double rim = pieceRim(p, s, x, &along, &across_);
   if (gradient) {
-    Eigen::Vector2d g = p.e * p.rim[1] + across(p) * p.rim[2];
+    Eigen::Vector2d g = p.e * along + across(p) * across_;
     if (r > 0 && D > 0) {
       const Eigen::Vector2d c = p.a + p.e * std::clamp(s, 0.0, p.length);
       g -= slope * (q - c) / r;
     }
     *gradient = g;
   }
-  return p.rim[0] + p.rim[1] * s + p.rim[2] * x - D;
+  return rim - D;
 }
 
 namespace {
@@ -411,13 +428,14 @@ double capsuleExit(const Piece& p, const Eigen::Vector2d& q, const Eigen::Vector
 
 }  // namespace
 
-double airExit(const Model& m, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t, double t1) {
+double airExit(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+               double t, double t1) {
   const Eigen::Vector3d q0 = o + d * t;
   const double te = capsuleExit(p, q0.head<2>(), d.head<2>(), 0.0) + t;
   const double tEnd = std::min(te, t1);
   auto f = [&](double tt) {
     const Eigen::Vector3d q = o + d * tt;
-    return q.z() - pieceFloor(m, p, q.head<2>());
+    return q.z() - pieceFloor(m, h, p, q.head<2>());
   };
   constexpr int kSteps = 16;
   double ta = t, fa = f(t);
@@ -439,16 +457,21 @@ double airExit(const Model& m, const Piece& p, const Eigen::Vector3d& o, const E
   return te < t1 ? te + 1e-9 * std::max(1.0, std::abs(te)) + 1e-6 * p.halfWidth : t1;
 }
 
-int airPiece(const Model& m, const CellPieces& cp, const CellRecord& c, const Eigen::Vector3d& q) {
+bool cover(const Model& m, const HeightField& h, const CellPieces& cp, const Eigen::Vector3d& q, int& air, int& lowest) {
+  const CellRecord& c = *h.cell;
   const int g = cp.grid;
   const int bx = binCoord(q.x(), c.box[0], c.box[1], g), by = binCoord(q.y(), c.box[2], c.box[3], g);
+  air = lowest = -1;
+  double low = std::numeric_limits<double>::infinity();
   for (uint32_t i : cp.bins[size_t(by) * g + bx]) {
     const Piece& p = cp.pieces[i];
     double s, x;
     if (pieceDistance(p, q.head<2>(), s, x) >= p.halfWidth) continue;
-    if (q.z() > pieceFloor(m, p, q.head<2>())) return int(i);
+    const double f = pieceFloor(m, h, p, q.head<2>());
+    if (q.z() > f) air = int(i);
+    if (f < low) low = f, lowest = int(i);
   }
-  return -1;
+  return lowest >= 0;
 }
 
 bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, uint32_t cell, const Eigen::Vector3d& o,
@@ -462,39 +485,78 @@ bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, ui
     return true;
   }
   const double eps = 1e-3 * texelOf(c);
+  const HeightField hf{&pack, &c};
+  // Before h's hit the ray is above h, and a floor rises above h by less than the deepest profile.
+  const double window = 1.25 * cp->deepest / std::max(std::abs(d.z()), 0.02);
   double t = t0;
-  int last = -2;  // -1: arrived by the height field's cast; >= 0: by leaving that piece's air
-  for (uint32_t it = 0; it < 64; ++it) {
+  int piece = -1, air, lowest;
+  bool found = false;
+  auto solid = [&](double tt) { return cover(m, hf, *cp, o + d * tt, air, lowest) && air < 0; };
+  for (uint32_t it = 0; it < 8 && !found; ++it) {
     out.iterations = it + 1;
-    const Eigen::Vector3d q = o + d * t;
-    const int pi = airPiece(m, *cp, c, q);
-    if (pi >= 0) {
-      t = airExit(m, cp->pieces[size_t(pi)], o, d, t, t1);
-      if (t >= t1) return false;
-      last = pi;
-      continue;
-    }
-    if (last == -1) break;
-    if (last >= 0) {
-      const double h = exact::surfaceHeight(pack, c, q.x(), q.y());
-      if (!std::isnan(h) && q.z() <= h + eps) break;
-    }
     double th;
-    if (!exact::traceCellLinear(pack, c, o, d, t, t1, th)) return false;
-    t = th;
-    last = -1;
-  }
-  out.t = t;
-  if (last >= 0) {
-    const Piece& p = cp->pieces[size_t(last)];
-    const Eigen::Vector3d q = o + d * t;
-    double s, x;
-    if (pieceDistance(p, q.head<2>(), s, x) < p.halfWidth) {
-      Eigen::Vector2d g;
-      pieceFloor(m, p, q.head<2>(), &g);
-      out.piece = last;
-      out.normal = Eigen::Vector3d(-g.x(), -g.y(), 1).normalized();
+    const bool hh = exact::traceCellLinear(pack, c, o, d, t, t1, th);
+    const double tH = hh ? th : t1;
+    // A floor above the height field before tH.
+    const double ta = std::max(t, tH - window);
+    double tPrev = t;
+    // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces near them).
+    const double reach = d.head<2>().norm() * (tH - ta);
+    auto near = [&](double tt) {
+      const Eigen::Vector3d q = o + d * tt;
+      const int g = cp->grid;
+      const int bx = binCoord(q.x(), c.box[0], c.box[1], g), by = binCoord(q.y(), c.box[2], c.box[3], g);
+      for (uint32_t i : cp->bins[size_t(by) * g + bx]) {
+        double s, x;
+        if (pieceDistance(cp->pieces[i], q.head<2>(), s, x) < cp->pieces[i].halfWidth + reach) return true;
+      }
+      return false;
+    };
+    const bool close = near(tH) || near(ta);
+    for (int k = 0; k <= 8 && !found && close; ++k) {
+      double tk = ta + (tH - ta) * k / 8.0;
+      if (!solid(tk)) {
+        tPrev = tk;
+        continue;
+      }
+      for (int j = 0; j < 30; ++j) {
+        const double tm = 0.5 * (tPrev + tk);
+        if (solid(tm)) tk = tm;
+        else tPrev = tm;
+      }
+      solid(tk);
+      t = tk;
+      piece = lowest;
+      found = true;
     }
+    if (found || !hh) break;
+    t = tH;
+    bool onward = false;
+    for (int j = 0; j < 16; ++j) {
+      const Eigen::Vector3d q = o + d * t;
+      if (!cover(m, hf, *cp, q, air, lowest)) {
+        const double h = hf(q.x(), q.y());
+        if (j == 0 || (!std::isnan(h) && q.z() <= h + eps)) found = true;
+        else onward = true;
+        break;
+      }
+      if (air < 0) {
+        piece = lowest;
+        found = true;
+        break;
+      }
+      t = airExit(m, hf, cp->pieces[size_t(air)], o, d, t, t1);
+      if (t >= t1) return false;
+    }
+    if (!found && !onward) found = true;
+  }
+  if (!found) return false;
+  out.t = t;
+  if (piece >= 0) {
+    Eigen::Vector2d g;
+    pieceFloor(m, hf, cp->pieces[size_t(piece)], (o + d * t).head<2>(), &g);
+    out.piece = piece;
+    out.normal = Eigen::Vector3d(-g.x(), -g.y(), 1).normalized();
   }
   return true;
 }

@@ -4,14 +4,16 @@
 // height field at the groove's lips, and the groove's cross-section profile - binned in a uniform
 // grid over the cell's tile, and the cast that carves them into the height field.
 //
-// The carved surface is min(h, floor_1, ..., floor_n): h the cell's height field, floor_i the
-// rim plane of piece i less its profile depth D(r) at r, the distance to the piece's segment,
-// wherever r < the half width (a capsule: ends are rounded, joints and crossings are the union
-// of the grooves' air). The cast (castGrooved) finds the first point along the ray that is under
-// every one of them: from the entry it advances through the air of whatever piece the ray is in
-// (to the piece's floor or out of its capsule), re-casts the height field where the ray is above
-// it, and stops where neither moves it. A groove that was neither detected nor given is never
-// drawn: cells without pieces cast their height field alone.
+// The carved surface: inside a piece's capsule (r < its half width, r the distance to its
+// segment: ends are rounded, joints and crossings are the union of the grooves) the lowest floor
+// there, floor_i = rim_i - D_i(r), the rim from the height field at the groove's lips and D the
+// profile; elsewhere the cell's height field h. The data's own crack in h (blurred by the pack's
+// reconstruction, wider and shallower than the profile) is replaced, not deepened. The cast
+// (castGrooved): h's first hit tH; a floor above h crossed before tH (sampled over the stretch
+// that can reach the floors); from tH, through the air of whatever piece the ray is in (to that
+// piece's floor or out of its capsule) until solid; out of every capsule and above h, on from
+// there. A groove that was neither detected nor given is never drawn: cells without pieces cast
+// their height field alone.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -29,14 +31,19 @@ namespace sa::gcast {
 // (the last is 0: the rim), linear in between.
 inline constexpr int kProfileSamples = 9;
 inline constexpr int kPieceWords = 12;
-inline constexpr int kBlockHeaderWords = 5;  // grid, pieces, lists' word, pieces' word, floor (f32)
-inline constexpr int kMaxGrid = 32;
+inline constexpr int kBlockHeaderWords = 6;  // grid, pieces, lists' word, pieces' word, floor, deepest profile (f32)
+inline constexpr int kMaxGrid = 128;
+inline constexpr double kMaxPieceTexels = 8;
 
 struct Piece {
   Eigen::Vector2d a = Eigen::Vector2d::Zero(), e = Eigen::Vector2d::UnitX();  // start and unit direction (u, v)
   double length = 0, halfWidth = 0;
-  // The rim: w = rim[0] + rim[1] s + rim[2] x, s along e from a, x along (-e.y, e.x).
-  double rim[3] = {0, 0, 0};
+  // The rim: the height field at the lips, half a width plus a texel to each side of the line
+  // (x = -lip, +lip across, along (-e.y, e.x)), at the start and the end: left and right at s = 0,
+  // then at s = length; bilinear in between (one side's where the other is uncovered, the line's
+  // own height where both are).
+  double lips[4] = {0, 0, 0, 0};
+  double lip = 0;  // the lips' offset from the line
   uint32_t groove = 0;  // its profile
 };
 
@@ -46,6 +53,7 @@ struct CellPieces {
   // The lowest w the carved surface reaches over the cell's box (at most its wMin): the cast
   // runs down to it (the grooves cut below the height field's box).
   double floor = 0;
+  double deepest = 0;  // the deepest profile sample of its pieces
   std::vector<Piece> pieces;
   std::vector<std::vector<uint32_t>> bins;   // grid * grid lists of piece indices (row-major, u fastest)
 };
@@ -54,7 +62,8 @@ struct Model {
   std::vector<float> profiles;               // kProfileSamples per groove, frame (world) units
   std::vector<CellPieces> cells;             // only cells with pieces, in cell order
   std::vector<int32_t> cellIndex;            // per pack cell: index into cells, -1 when none
-  uint32_t grooves = 0, skipped = 0;         // skipped: grooves that met no cell's surface
+  uint32_t grooves = 0, skipped = 0;         // profiles stored; skipped: gaps, and grooves on no cell's surface
+  uint32_t drawn = 0;                        // grooves with pieces in some cell
   const CellPieces* find(uint32_t cell) const {
     return cell < cellIndex.size() && cellIndex[cell] >= 0 ? &cells[size_t(cellIndex[cell])] : nullptr;
   }
@@ -66,8 +75,8 @@ struct Model {
 bool profileOf(const Groove& g, float out[kProfileSamples]);
 
 // Pieces of every groove in every cell whose surface it lies on (the groove's line within its
-// depth plus two texels of the cell's height field), rim planes from the height field at the
-// lips (half a width plus a texel to each side; the line's own height where a lip is uncovered).
+// depth plus two texels of the cell's height field), at most 8 texels long (so the rim follows
+// the surface), their lips from the height field.
 Model buildModel(const PackReader& pack, const GrooveSet& set);
 
 // The pack section `GROO` (docs/FORMAT.md): the model and the groove set's JSON (so `view` and
@@ -104,13 +113,26 @@ Model modelFromSection(const PackReader& pack, const SectionView& v);
 double pieceDistance(const Piece& p, const Eigen::Vector2d& q, double& s, double& x);
 // The profile depth at r (0 at and past the half width); slope: dD/dr.
 double profileDepth(const float* profile, double r, double halfWidth, double* slope = nullptr);
+// A cell's height field (exact::surfaceHeight: the shader's sampleHeight in double; NaN uncovered).
+struct HeightField {
+  const PackReader* pack = nullptr;
+  const CellRecord* cell = nullptr;
+  double operator()(double u, double v) const;
+  double texel() const;
+};
+// The rim at (s, x): the piece's lips, bilinear (clamped along), so the groove's edges meet the
+// surface; slopes: d rim / ds and d rim / dx.
+double pieceRim(const Piece& p, double s, double x, double* slopeAlong = nullptr, double* slopeAcross = nullptr);
 // floor_i at (u, v) (the rim where r >= half width); gradient: d floor / d(u, v).
-double pieceFloor(const Model& m, const Piece& p, const Eigen::Vector2d& q, Eigen::Vector2d* gradient = nullptr);
+double pieceFloor(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector2d& q,
+                  Eigen::Vector2d* gradient = nullptr);
 // Where the ray o + t d, inside piece p's air at t, leaves it: a point on or under its floor
 // (f <= 0), or just out of its capsule, at most t1.
-double airExit(const Model& m, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t, double t1);
-// The first piece of cell cp in whose air frame point q lies, -1 when none.
-int airPiece(const Model& m, const CellPieces& cp, const CellRecord& c, const Eigen::Vector3d& q);
+double airExit(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+               double t, double t1);
+// Whether frame point q lies in a capsule of cell cp's pieces; air: a piece whose floor q is above
+// (-1: q is solid); lowest: the piece with the lowest floor over q.
+bool cover(const Model& m, const HeightField& h, const CellPieces& cp, const Eigen::Vector3d& q, int& air, int& lowest);
 
 struct CastResult {
   double t = 0;

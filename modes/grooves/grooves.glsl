@@ -1,11 +1,12 @@
 // The `grooves` mode's cast (modes/grooves/groove_cast.cpp castGrooved is the same rule in
 // double): grooves carved into the height field as path-based surface detail (seed 003 §3-5;
-// Bosch & Patow's real-time form: per tile a grid of path-segment lists). The surface is
-// min(h, floor_1 .. floor_n): floor_i is piece i's rim plane less its profile depth D(r) at the
-// distance r from its segment, inside its capsule (r < half width; rounded ends, joints and
-// crossings are the union of the grooves' air). From the box entry, the ray advances through the
-// air of whatever piece it is in (to the piece's floor, or out of its capsule), the height field
-// is marched (parallax_cast.glsl) where the ray is above it, until neither moves it: the hit's
+// Bosch & Patow's real-time form: per tile a grid of path-segment lists). Inside a groove's
+// capsule (r < half width, r the distance to one of its pieces' segments: rounded ends, joints
+// and crossings are the union of the grooves) the surface is the lowest floor there, floor_i =
+// rim_i - D_i(r), the rim taken from the height field at the groove's lips and D the profile;
+// elsewhere the height field. The height field is marched (parallax_cast.glsl), floors above it
+// are caught before its hit, and from there the ray advances through the air of whatever piece
+// it is in (to the piece's floor, or out of its capsule) until it is solid: the hit's
 // depth is exact to the profile (gl_FragDepth, so a pick measures a crack's depth) and a floor
 // hit shades with its facet's normal. Masking is the cast itself; shadows are the same cast
 // toward the light (003 eqs. 3-4 resolve the same order analytically). A groove narrower than
@@ -35,7 +36,8 @@ const uint kNoGrooves = 0xffffffffu;
 struct GPiece {
   vec2 a, e;      // start, unit direction (frame u, v)
   float len, hw;  // length, half width
-  vec3 rim;       // w = rim.x + rim.y s + rim.z x
+  vec4 lips;      // the height field at the lips: left, right at s = 0, then at s = len
+  float lip;      // the lips' offset across
   uint prof;      // first word of its profile (9 depths)
 };
 
@@ -48,8 +50,9 @@ GPiece gPiece(uint blk, uint i) {
   p.e = vec2(gWordF(w + 2u), gWordF(w + 3u));
   p.len = gWordF(w + 4u);
   p.hw = gWordF(w + 5u);
-  p.rim = vec3(gWordF(w + 6u), gWordF(w + 7u), gWordF(w + 8u));
-  p.prof = grooveWord[w + 9u];
+  p.lips = vec4(gWordF(w + 6u), gWordF(w + 7u), gWordF(w + 8u), gWordF(w + 9u));
+  p.prof = grooveWord[w + 10u];
+  p.lip = gWordF(w + 11u);
   return p;
 }
 
@@ -71,18 +74,29 @@ float gDepth(uint prof, float r, float hw, out float slope) {
   return mix(d0, d1, f - float(k));
 }
 
+// The rim at (s, x) (groove_cast.cpp pieceRim): the piece's lips, bilinear (clamped along), so
+// the groove's edges meet the surface.
+float gRim(GPiece p, float s, float x, out float along, out float across) {
+  float fs = p.len > 0.0 ? clamp(s / p.len, 0.0, 1.0) : 0.0, fx = (x + p.lip) / (2.0 * p.lip);
+  float l = mix(p.lips.x, p.lips.z, fs), r = mix(p.lips.y, p.lips.w, fs);
+  across = (r - l) / (2.0 * p.lip);
+  along = p.len > 0.0 && s > 0.0 && s < p.len ? (mix(p.lips.z, p.lips.w, fx) - mix(p.lips.x, p.lips.y, fx)) / p.len : 0.0;
+  return mix(l, r, fx);
+}
+
 float gFloor(GPiece p, vec2 q) {
-  float s, x, sl;
+  float s, x, sl, sa, sx;
   float r = gDist(p, q, s, x);
-  return p.rim.x + p.rim.y * s + p.rim.z * x - gDepth(p.prof, r, p.hw, sl);
+  return gRim(p, s, x, sa, sx) - gDepth(p.prof, r, p.hw, sl);
 }
 
 // The facet normal (frame) of the floor at q.
 vec3 gNormal(GPiece p, vec2 q) {
-  float s, x, sl;
+  float s, x, sl, sa, sx;
   float r = gDist(p, q, s, x);
   float D = gDepth(p.prof, r, p.hw, sl);
-  vec2 g = p.e * p.rim.y + vec2(-p.e.y, p.e.x) * p.rim.z;
+  gRim(p, s, x, sa, sx);
+  vec2 g = p.e * sa + vec2(-p.e.y, p.e.x) * sx;
   if (r > 0.0 && D > 0.0) g -= sl * (q - (p.a + p.e * clamp(s, 0.0, p.len))) / r;
   return normalize(vec3(-g, 1.0));
 }
@@ -154,19 +168,34 @@ int gBin(Cell c, uint blk, vec2 q) {
   return b.y * G + b.x;
 }
 
-// The first piece in whose air frame point q lies, -1 when none.
-int gAirPiece(Cell c, uint blk, vec3 q) {
+// Whether q lies in any piece's capsule (there the surface is the lowest floor over q, the height
+// field is not); air: a piece whose floor q is above (-1: none, q is solid); lowest: the piece
+// with the lowest floor.
+bool gCover(Cell c, uint blk, vec3 q, out int air, out int lowest) {
   int b = gBin(c, blk, q.xy);
-  uint start = grooveWord[blk + 5u + 2u * uint(b)], n = grooveWord[blk + 6u + 2u * uint(b)];
+  uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
   uint list = blk + grooveWord[blk + 2u] + start;
+  air = -1;
+  lowest = -1;
+  float low = 1e30;
+  uint pieces = blk + grooveWord[blk + 3u];
   for (uint k = 0u; k < n; ++k) {
     uint i = grooveWord[list + k];
+    // The capsule test from the piece's first six words; the rest only for a covering piece.
+    uint w = pieces + i * 12u;
+    vec2 a = vec2(gWordF(w), gWordF(w + 1u)), e = vec2(gWordF(w + 2u), gWordF(w + 3u));
+    float hw = gWordF(w + 5u);
+    vec2 r = q.xy - a;
+    if (dot(r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u)), r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u))) >= hw * hw) continue;
     GPiece p = gPiece(blk, i);
-    float s, x;
-    if (gDist(p, q.xy, s, x) >= p.hw) continue;
-    if (q.z > gFloor(p, q.xy)) return int(i);
+    float f = gFloor(p, q.xy);
+    if (q.z > f) air = int(i);
+    if (f < low) {
+      low = f;
+      lowest = int(i);
+    }
   }
-  return -1;
+  return lowest >= 0;
 }
 
 // The grooves cut below the height field's box: the cast runs down to the lowest floor.
@@ -175,46 +204,93 @@ void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
   if (blk != kNoGrooves) bmin.z = min(bmin.z, gWordF(blk + 4u));
 }
 
+// Whether a piece in q's bin comes within its half width plus `radius` of q.
+bool gNear(Cell c, uint blk, vec2 q, float radius) {
+  int b = gBin(c, blk, q);
+  uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
+  uint list = blk + grooveWord[blk + 2u] + start, pieces = blk + grooveWord[blk + 3u];
+  for (uint k = 0u; k < n; ++k) {
+    uint w = pieces + grooveWord[list + k] * 12u;
+    vec2 a = vec2(gWordF(w), gWordF(w + 1u)), e = vec2(gWordF(w + 2u), gWordF(w + 3u)), r = q - a;
+    if (length(r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u))) < gWordF(w + 5u) + radius) return true;
+  }
+  return false;
+}
+
+// Inside a groove's capsule the carved surface is the lowest floor there; elsewhere the height
+// field. The height field's march finds tH; where it passed over a capsule whose floor lies above
+// the height field (the data's blurred crack is wider than its profile), the floor was crossed
+// first: the stretch of ray that can reach the floors before tH is sampled for a solid point
+// inside a capsule. From tH, a point in a groove's air advances to that piece's floor or out of
+// its capsule, until it is solid; out of every capsule and above the height field, the march
+// goes on from there.
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
   uint blk = grooveEntry[cell];
   if (blk == kNoGrooves) return parallaxCastCell(c, cell, boxSteps, o, d, tEnter, tExit, tHit, work);
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
   float eps = 1e-3 * min(texel.x, texel.y);
+  // Before h's hit the ray is above h, and a floor rises above h by less than the deepest profile.
+  float window = 1.25 * gWordF(blk + 5u) / max(abs(d.z), 0.02);
   float t = tEnter;
-  int last = -2;  // -1: arrived by the height field's cast; >= 0: by leaving that piece's air
   work = 0u;
-  for (int it = 0; it < 32; ++it) {
-    vec3 q = o + d * t;
-    int pi = gAirPiece(c, blk, q);
-    work += 1u;
-    if (pi >= 0) {
-      t = gAirExit(gPiece(blk, uint(pi)), o, d, t, tExit);
-      if (t >= tExit) return false;
-      last = pi;
-      continue;
-    }
-    if (last == -1) break;
-    if (last >= 0) {
-      float h = sampleHeight(c, q.xy);
-      if (h != kUncovered && q.z <= h + eps) break;
-    }
+  int piece = -1;
+  bool found = false;
+  for (int it = 0; it < 8 && !found; ++it) {
     float th;
     uint w;
-    bool hit = parallaxCastCell(c, cell, boxSteps, o, d, t, tExit, th, w);
+    bool hh = parallaxCastCell(c, cell, boxSteps, o, d, t, tExit, th, w);
     work += w;
-    if (!hit) return false;
-    t = th;
-    last = -1;
-  }
-  tHit = t;
-  if (last >= 0) {
-    GPiece p = gPiece(blk, uint(last));
-    vec3 q = o + d * t;
-    float s, x;
-    if (gDist(p, q.xy, s, x) < p.hw) {
-      castNormal = gNormal(p, q.xy);
-      castHasNormal = true;
+    float tH = hh ? th : tExit;
+    // A floor above the height field before tH.
+    float ta = max(t, tH - window), tPrev = t;
+    int air, lowest;
+    // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces
+    // near them).
+    float reach = length(d.xy) * (tH - ta);
+    bool near = gNear(c, blk, (o + d * tH).xy, reach) || gNear(c, blk, (o + d * ta).xy, reach);
+    for (int k = 0; k <= 8 && !found && near; ++k) {
+      float tk = mix(ta, tH, float(k) / 8.0);
+      work += 1u;
+      if (!gCover(c, blk, o + d * tk, air, lowest) || air >= 0) {
+        tPrev = tk;
+        continue;
+      }
+      for (int j = 0; j < 14; ++j) {
+        float tm = 0.5 * (tPrev + tk);
+        if (gCover(c, blk, o + d * tm, air, lowest) && air < 0) tk = tm; else tPrev = tm;
+      }
+      gCover(c, blk, o + d * tk, air, lowest);
+      t = tk;
+      piece = lowest;
+      found = true;
     }
+    if (found || !hh) break;
+    t = tH;
+    bool onward = false;
+    for (int j = 0; j < 16; ++j) {
+      vec3 q = o + d * t;
+      work += 1u;
+      if (!gCover(c, blk, q, air, lowest)) {
+        // Out of every capsule: the height field's surface (its hit, or a capsule's edge under it).
+        if (j == 0 || (sampleHeight(c, q.xy) != kUncovered && q.z <= sampleHeight(c, q.xy) + eps)) found = true;
+        else onward = true;
+        break;
+      }
+      if (air < 0) {
+        piece = lowest;
+        found = true;
+        break;
+      }
+      t = gAirExit(gPiece(blk, uint(air)), o, d, t, tExit);
+      if (t >= tExit) return false;
+    }
+    if (!found && !onward) found = true;  // the iteration cap: take where it stopped
+  }
+  if (!found) return false;
+  tHit = t;
+  if (piece >= 0) {
+    castNormal = gNormal(gPiece(blk, uint(piece)), (o + d * t).xy);
+    castHasNormal = true;
   }
   return true;
 }
@@ -238,29 +314,29 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
 
 // One ray of the footprint: from the rim plane of piece p (where it meets it) through the
 // grooves' air to a floor; shaded there, or as the surface where it is in no groove.
-vec3 gFootprintSample(Cell c, uint blk, GPiece p, vec3 o, vec3 dk, vec3 rel, float t1) {
+vec3 gFootprintSample(Cell c, uint blk, GPiece p, float s0, vec3 o, vec3 dk, vec3 rel, float t1) {
+  // The rim's tangent plane at the piece's point closest to the pixel's hit (s0).
   vec2 n = vec2(-p.e.y, p.e.x);
-  // The rim plane: z - rim.y (q - a).e - rim.z (q - a).n = rim.x.
-  vec3 N = vec3(-p.rim.y * p.e - p.rim.z * n, 1.0);
-  float off = p.rim.x - p.rim.y * dot(p.a, p.e) - p.rim.z * dot(p.a, n);
+  float sa, sx;
+  vec2 c0 = p.a + p.e * s0;
+  float z0 = gRim(p, s0, 0.0, sa, sx);
+  vec3 N = vec3(-sa * p.e - sx * n, 1.0);
+  float off = z0 + dot(N.xy, c0);
   float den = dot(N, dk);
   if (abs(den) < 1e-12) return vec3(-1.0);
   float t = (off - dot(N, o)) / den;
   if (t <= 0.0) return vec3(-1.0);
-  int last = -1;
+  int air = -1, lowest = -1;
+  bool cov = false;
   for (int it = 0; it < 8; ++it) {
-    int pi = gAirPiece(c, blk, o + dk * t);
-    if (pi < 0) break;
-    t = gAirExit(gPiece(blk, uint(pi)), o, dk, t, t + t1);
-    last = pi;
+    cov = gCover(c, blk, o + dk * t, air, lowest);
+    if (!cov || air < 0) break;
+    t = gAirExit(gPiece(blk, uint(air)), o, dk, t, t + t1);
   }
   vec3 q = o + dk * t;
   vec3 nWorld;
-  float s, x;
-  GPiece lp;
-  if (last >= 0) lp = gPiece(blk, uint(last));
-  if (last >= 0 && gDist(lp, q.xy, s, x) < lp.hw) {
-    vec3 nf = gNormal(lp, q.xy);
+  if (cov) {
+    vec3 nf = gNormal(gPiece(blk, uint(lowest)), q.xy);
     nWorld = c.axisU.xyz * nf.x + c.axisV.xyz * nf.y + c.axisW.xyz * nf.z;
   } else if (storedNormals) {
     nWorld = sampleNormal(c, q.xy);
@@ -293,14 +369,16 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   for (int by = b0.y; by <= b1.y; ++by)
     for (int bx = b0.x; bx <= b1.x; ++bx) {
       uint b = uint(by * G + bx);
-      uint start = grooveWord[blk + 5u + 2u * b], n = grooveWord[blk + 6u + 2u * b];
+      uint start = grooveWord[blk + 6u + 2u * b], n = grooveWord[blk + 7u + 2u * b];
       uint list = blk + grooveWord[blk + 2u] + start;
       for (uint k = 0u; k < n; ++k) {
         uint i = grooveWord[list + k];
         GPiece p = gPiece(blk, i);
         float s, x;
         float gap = gDist(p, hit.xy, s, x) - p.hw;
-        vec3 a3 = vec3(-p.e.y, p.e.x, p.rim.z);
+        float ra, rx;
+        gRim(p, s, x, ra, rx);
+        vec3 a3 = vec3(-p.e.y, p.e.x, rx);
         float wpx = 2.0 * p.hw * length(a3 - d * dot(a3, d)) / foot;
         if (wpx < 2.0 && gap < reach && gap < bestGap) {
           best = int(i);
@@ -310,8 +388,12 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
     }
   if (best < 0) return color;
   GPiece p = gPiece(blk, uint(best));
+  float s0, x0, ra, rx;
+  gDist(p, hit.xy, s0, x0);
+  s0 = clamp(s0, 0.0, p.len);
+  gRim(p, s0, 0.0, ra, rx);
   vec3 R = toFrame(c, camRight), U = toFrame(c, camUp);
-  vec3 e3 = vec3(p.e, p.rim.y);
+  vec3 e3 = vec3(p.e, ra);
   vec2 g2 = vec2(dot(e3, R), dot(e3, U));
   if (dot(g2, g2) < 1e-12) return color;
   g2 = normalize(g2);
@@ -326,7 +408,7 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   for (int k = 0; k < n; ++k) {
     float sg = (-1.0 + (2.0 * float(k) + 1.0) / float(n)) * hi;
     float wt = abs(sg) <= lo ? 1.0 : (hi - abs(sg)) / max(hi - lo, 1e-6);
-    vec3 col = gFootprintSample(c, blk, p, o, normalize(d + qf * (sg * pixelAngle)), rel, t1);
+    vec3 col = gFootprintSample(c, blk, p, s0, o, normalize(d + qf * (sg * pixelAngle)), rel, t1);
     if (col.x < 0.0) continue;
     sum += wt * col;
     wsum += wt;
