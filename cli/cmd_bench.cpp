@@ -47,6 +47,7 @@ const char* kHelp =
     "                         the parallax march (default 8)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time, and the\n"
     "                         auto mode (small boxes as slices) to show what that switch saves\n"
+    "  --no-groove-aa         grooves mode: one ray a pixel also where a groove is under 2 pixels wide\n"
     "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
     "                         turn a skip off for every configuration\n"
@@ -192,7 +193,7 @@ int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "csv"},
-                     {"compare-skips", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
+                     {"compare-skips", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -225,6 +226,7 @@ int cmdBench(int argc, char** argv) {
   s = slicesFromArgs(a, base);
   if (!s) return reportError(s);
   base.useColor = !a.flag("no-color");
+  base.grooveAA = !a.flag("no-groove-aa");
   base.cull.frustum = !a.flag("no-frustum-cull");
   base.cull.backfaceCull = !a.flag("no-backface-cull");
   base.cull.adaptiveSteps = !a.flag("no-adaptive-steps");

@@ -48,6 +48,7 @@ const char* kHelp =
     "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
     "                         the parallax march (default 8)\n"    "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
+    "  --no-groove-aa         grooves mode: one ray a pixel also where a groove is under 2 pixels wide\n"
     "  --no-color             ignore scan colours\n"
     "  --shading MODE         lambert (head light, default), normals, height (colour ramp along --up),\n"
     "                         color (scan colour, the default when the pack has colour)\n"
@@ -96,6 +97,7 @@ Status settingsFromArgs(const Args& a, RenderSettings& rs) {
     for (int i = 0; i < 3; ++i) rs.background[i] = float(std::clamp((*v)[i], 0.0, 1.0));
   }
   rs.useColor = !a.flag("no-color");
+  rs.grooveAA = !a.flag("no-groove-aa");
   if (a.has("shading")) {
     const std::string sh = a.get("shading");
     if (sh == "lambert") rs.shading = Shading::kLambert;
@@ -173,7 +175,7 @@ int cmdRender(int argc, char** argv) {
   Status s = a.parse(argc, argv,
                      {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "auto-pixels", "refine",
                       "background", "shading", "clip-box", "section", "mode", "light"},
-                     {"edl", "shadows", "boxes", "no-color", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
+                     {"edl", "shadows", "boxes", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);

@@ -23,7 +23,7 @@ double texelOf(const CellRecord& c) {
 
 Eigen::Vector2d across(const Piece& p) { return {-p.e.y(), p.e.x()}; }
 
-int gridOf(const CellRecord& c) { return std::clamp(int(std::ceil(std::max(c.tileW, c.tileH) / 8.0)), 1, kMaxGrid); }
+int gridOf(const CellRecord& c) { return std::clamp(int(std::ceil(std::max(c.tileW, c.tileH) / 4.0)), 1, kMaxGrid); }
 
 // The bin of (u, v) in a cell's grid (clamped to the grid).
 int binCoord(double x, double lo, double hi, int g) {
@@ -63,6 +63,26 @@ bool onSurface(const PackReader& pack, const CellRecord& c, const Eigen::Vector3
 // sample.
 double lowestFloor(const Piece& p, const float* profile) {
   return *std::min_element(p.lips, p.lips + 4) - *std::max_element(profile, profile + kProfileSamples);
+}
+
+// How far piece p's floor rises above the height field over its capsule (samples half a texel
+// apart; rises under a twentieth of a texel count as none).
+double riseOver(const PackReader& pack, const CellRecord& c, const Model& m, const Piece& p) {
+  const HeightField h{&pack, &c};
+  const double step = 0.5 * texelOf(c);
+  const int ns = std::clamp(int(std::ceil((p.length + 2 * p.halfWidth) / step)), 1, 4096);
+  const int nx = std::clamp(int(std::ceil(2 * p.halfWidth / step)), 1, 4096);
+  double rise = 0;
+  for (int i = 0; i <= ns; ++i)
+    for (int j = 0; j <= nx; ++j) {
+      const Eigen::Vector2d q = p.a + p.e * (-p.halfWidth + (p.length + 2 * p.halfWidth) * i / ns) +
+                                across(p) * (-p.halfWidth + 2 * p.halfWidth * j / nx);
+      double s, x;
+      if (pieceDistance(p, q, s, x) >= p.halfWidth) continue;
+      const double hq = h(q.x(), q.y());
+      if (!std::isnan(hq)) rise = std::max(rise, pieceFloor(m, h, p, q) - hq);
+    }
+  return rise > 0.05 * texelOf(c) ? rise : 0.0;
 }
 
 void binPieces(const CellRecord& c, CellPieces& cp) {
@@ -184,7 +204,7 @@ Model buildModel(const PackReader& pack, const GrooveSet& set) {
     for (const Piece& p : per[ci].pieces) {
       const float* prof = &m.profiles[size_t(p.groove) * kProfileSamples];
       per[ci].floor = std::min({per[ci].floor, lowestFloor(p, prof), cells[ci].box[4] - *std::max_element(prof, prof + kProfileSamples)});
-      per[ci].deepest = std::max(per[ci].deepest, double(*std::max_element(prof, prof + kProfileSamples)));
+      per[ci].rise = std::max(per[ci].rise, riseOver(pack, cells[ci], m, p));
     }
     binPieces(cells[ci], per[ci]);
     m.cellIndex[ci] = int32_t(m.cells.size());
@@ -212,7 +232,7 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
     const uint32_t listOff = kBlockHeaderWords + 2 * g * g, pieceOff = listOff + listLen;
     words.insert(words.end(), {g, uint32_t(cp.pieces.size()), listOff, pieceOff});
     put(float(cp.floor) - 1e-6f * std::max(1.0f, std::abs(float(cp.floor))));
-    put(float(cp.deepest));
+    put(float(cp.rise));
     uint32_t start = 0;
     for (const auto& b : cp.bins) {
       words.insert(words.end(), {start, uint32_t(b.size())});
@@ -312,7 +332,7 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
     cp.grid = int(v.words[b]);
     const uint32_t n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
     cp.floor = f(b + 4);
-    cp.deepest = f(b + 5);
+    cp.rise = f(b + 5);
     cp.bins.resize(size_t(cp.grid) * cp.grid);
     for (size_t k = 0; k < cp.bins.size(); ++k) {
       const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];
@@ -486,8 +506,8 @@ bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, ui
   }
   const double eps = 1e-3 * texelOf(c);
   const HeightField hf{&pack, &c};
-  // Before h's hit the ray is above h, and a floor rises above h by less than the deepest profile.
-  const double window = 1.25 * cp->deepest / std::max(std::abs(d.z()), 0.02);
+  // Before h's hit the ray is above h; a floor rises above h by at most cp->rise.
+  const double window = 1.25 * cp->rise / std::max(std::abs(d.z()), 0.02);
   double t = t0;
   int piece = -1, air, lowest;
   bool found = false;
@@ -512,7 +532,7 @@ bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, ui
       }
       return false;
     };
-    const bool close = near(tH) || near(ta);
+    const bool close = cp->rise > 0 && (near(tH) || near(ta));
     for (int k = 0; k <= 8 && !found && close; ++k) {
       double tk = ta + (tH - ta) * k / 8.0;
       if (!solid(tk)) {

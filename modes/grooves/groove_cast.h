@@ -31,8 +31,8 @@ namespace sa::gcast {
 // (the last is 0: the rim), linear in between.
 inline constexpr int kProfileSamples = 9;
 inline constexpr int kPieceWords = 12;
-inline constexpr int kBlockHeaderWords = 6;  // grid, pieces, lists' word, pieces' word, floor, deepest profile (f32)
-inline constexpr int kMaxGrid = 128;
+inline constexpr int kBlockHeaderWords = 6;  // grid, pieces, lists' word, pieces' word, floor, rise (f32)
+inline constexpr int kMaxGrid = 256;
 inline constexpr double kMaxPieceTexels = 8;
 
 struct Piece {
@@ -53,7 +53,10 @@ struct CellPieces {
   // The lowest w the carved surface reaches over the cell's box (at most its wMin): the cast
   // runs down to it (the grooves cut below the height field's box).
   double floor = 0;
-  double deepest = 0;  // the deepest profile sample of its pieces
+  // How far a floor rises above the height field anywhere in the cell's capsules (0: nowhere by
+  // more than a twentieth of a texel): a ray can cross such a floor before the height field's hit,
+  // within rise / |d.w| of it; the cast looks there only where rise > 0.
+  double rise = 0;
   std::vector<Piece> pieces;
   std::vector<std::vector<uint32_t>> bins;   // grid * grid lists of piece indices (row-major, u fastest)
 };

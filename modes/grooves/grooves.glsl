@@ -198,6 +198,34 @@ bool gCover(Cell c, uint blk, vec3 q, out int air, out int lowest) {
   return lowest >= 0;
 }
 
+// The height field's first crossing from above after t0 (the ray left a groove's capsule above
+// it): 32 steps and a bisection, lighter than the mode's march (a second call site of that one
+// costs llvmpipe on every pixel).
+bool gMarchOn(Cell c, vec3 o, vec3 d, float t0, float t1, out float tHit) {
+  float tPrev = t0;
+  vec3 p = o + d * t0;
+  float h = sampleHeight(c, p.xy);
+  bool above = h == kUncovered || p.z > h;
+  for (int i = 1; i <= 32; ++i) {
+    float t = mix(t0, t1, float(i) / 32.0);
+    p = o + d * t;
+    h = sampleHeight(c, p.xy);
+    if (h != kUncovered && p.z <= h && above) {
+      for (int k = 0; k < 12; ++k) {
+        float tm = 0.5 * (tPrev + t);
+        vec3 pm = o + d * tm;
+        float hm = sampleHeight(c, pm.xy);
+        if (hm != kUncovered && pm.z <= hm) t = tm; else tPrev = tm;
+      }
+      tHit = t;
+      return true;
+    }
+    above = h == kUncovered || p.z > h;
+    tPrev = t;
+  }
+  return false;
+}
+
 // The grooves cut below the height field's box: the cast runs down to the lowest floor.
 void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
   uint blk = grooveEntry[cell];
@@ -229,25 +257,38 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
   if (blk == kNoGrooves) return parallaxCastCell(c, cell, boxSteps, o, d, tEnter, tExit, tHit, work);
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
   float eps = 1e-3 * min(texel.x, texel.y);
-  // Before h's hit the ray is above h, and a floor rises above h by less than the deepest profile.
-  float window = 1.25 * gWordF(blk + 5u) / max(abs(d.z), 0.02);
-  float t = tEnter;
+  // Before h's hit the ray is above h; a floor rises above h by at most `rise` (0: nowhere).
+  float rise = gWordF(blk + 5u);
+  float window = 1.25 * rise / max(abs(d.z), 0.02);
+  float t = tEnter, th;
+  // The height field's hit, outside any loop (llvmpipe pays for a march inside one on every pixel),
+  // over the height field's own box (the same march as parallax's, not stretched to the floors).
+  vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
+  vec3 t0 = (bmin - o) / d, t1 = (bmax - o) / d;
+  vec3 tn = min(t0, t1), tf = max(t0, t1);
+  float hEnter = max(max(max(tn.x, tn.y), tn.z), 0.0), hExit = min(min(tf.x, tf.y), tf.z);
   work = 0u;
+  bool hh = hEnter < hExit && parallaxCastCell(c, cell, boxSteps, o, d, hEnter, hExit, th, work);
+  int air, lowest;
+  // The common case: no floor rises above the height field, and its hit is in no capsule.
+  bool usual = hh && rise == 0.0 && !gCover(c, blk, o + d * th, air, lowest);
+  if (usual) {
+    tHit = th;
+    return true;
+  }
   int piece = -1;
   bool found = false;
-  for (int it = 0; it < 8 && !found; ++it) {
-    float th;
-    uint w;
-    bool hh = parallaxCastCell(c, cell, boxSteps, o, d, t, tExit, th, w);
-    work += w;
+  // (A loop, not an if: llvmpipe runs an if's body under a mask on every pixel, but leaves a loop
+  // no lane is in at once.)
+  for (int it = 0; it < (usual ? 0 : 8) && !found; ++it) {
+    if (it > 0) hh = gMarchOn(c, o, d, t, tExit, th);  // on from where the ray left the capsules
     float tH = hh ? th : tExit;
     // A floor above the height field before tH.
     float ta = max(t, tH - window), tPrev = t;
-    int air, lowest;
     // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces
     // near them).
     float reach = length(d.xy) * (tH - ta);
-    bool near = gNear(c, blk, (o + d * tH).xy, reach) || gNear(c, blk, (o + d * ta).xy, reach);
+    bool near = rise > 0.0 && (gNear(c, blk, (o + d * tH).xy, reach) || gNear(c, blk, (o + d * ta).xy, reach));
     for (int k = 0; k <= 8 && !found && near; ++k) {
       float tk = mix(ta, tH, float(k) / 8.0);
       work += 1u;
@@ -312,47 +353,59 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   return r;
 }
 
-// One ray of the footprint: from the rim plane of piece p (where it meets it) through the
-// grooves' air to a floor; shaded there, or as the surface where it is in no groove.
-vec3 gFootprintSample(Cell c, uint blk, GPiece p, float s0, vec3 o, vec3 dk, vec3 rel, float t1) {
-  // The rim's tangent plane at the piece's point closest to the pixel's hit (s0).
+// The colour of one ray of a narrow groove's footprint, in the groove's cross-section (its profile
+// on the rim's tangent plane at the pixel, the groove straight over the pixel): where the ray
+// meets the rim plane, then down its profile to the first facet it reaches (masking: a ray enters
+// between the walls and meets the far one), shaded with that facet's normal; outside the
+// profile, the rim's surface.
+vec3 gFootprintSample(Cell c, GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, vec3 albedo, vec3 world) {
   vec2 n = vec2(-p.e.y, p.e.x);
-  float sa, sx;
-  vec2 c0 = p.a + p.e * s0;
-  float z0 = gRim(p, s0, 0.0, sa, sx);
-  vec3 N = vec3(-sa * p.e - sx * n, 1.0);
-  float off = z0 + dot(N.xy, c0);
+  vec3 N = vec3(-(ra * p.e + rx * n), 1.0);
   float den = dot(N, dk);
   if (abs(den) < 1e-12) return vec3(-1.0);
-  float t = (off - dot(N, o)) / den;
+  float t = dot(N, C - o) / den;
   if (t <= 0.0) return vec3(-1.0);
-  int air = -1, lowest = -1;
-  bool cov = false;
-  for (int it = 0; it < 8; ++it) {
-    cov = gCover(c, blk, o + dk * t, air, lowest);
-    if (!cov || air < 0) break;
-    t = gAirExit(gPiece(blk, uint(air)), o, dk, t, t + t1);
+  vec3 P = o + dk * t;
+  float xk = dot(P.xy - C.xy, n);
+  float dDdx = 0.0;
+  if (abs(xk) < p.hw) {
+    float dx = dot(dk.xy, n), dz = dk.z - ra * dot(dk.xy, p.e) - rx * dx;  // per unit along the ray, below the rim plane
+    float xh = xk;
+    if (abs(dx) > 1e-7 * abs(dz)) {
+      // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between knots.
+      float k = dz / dx, step = p.hw / 8.0, dir = sign(dx);
+      float x0 = xk, sl;
+      float f0 = gDepth(p.prof, abs(x0), p.hw, sl);
+      xh = dir * p.hw;
+      for (int m = 0; m < 17; ++m) {
+        // The next knot (or the far edge) in the ray's direction.
+        float x1 = dir > 0.0 ? min(floor(x0 / step + 1e-4) * step + step, p.hw) : max(ceil(x0 / step - 1e-4) * step - step, -p.hw);
+        float f1 = (x1 - xk) * k + gDepth(p.prof, abs(x1), p.hw, sl);
+        if (f1 <= 0.0) {
+          xh = x0 + (x1 - x0) * f0 / max(f0 - f1, 1e-30);
+          break;
+        }
+        if (abs(x1) >= p.hw) break;
+        x0 = x1;
+        f0 = f1;
+      }
+    }
+    float sl;
+    gDepth(p.prof, abs(xh), p.hw, sl);
+    dDdx = xh < 0.0 ? -sl : sl;
   }
-  vec3 q = o + dk * t;
-  vec3 nWorld;
-  if (cov) {
-    vec3 nf = gNormal(gPiece(blk, uint(lowest)), q.xy);
-    nWorld = c.axisU.xyz * nf.x + c.axisV.xyz * nf.y + c.axisW.xyz * nf.z;
-  } else if (storedNormals) {
-    nWorld = sampleNormal(c, q.xy);
-  } else {
-    vec3 nf = gradientNormal(c, q.xy);
-    nWorld = c.axisU.xyz * nf.x + c.axisV.xyz * nf.y + c.axisW.xyz * nf.z;
-  }
-  vec3 world = rel + c.axisU.xyz * q.x + c.axisV.xyz * q.y + c.axisW.xyz * q.z;
-  vec3 albedo = useColor ? sampleColor(c, q.xy) : baseColor;
+  vec2 g = p.e * ra + n * (rx - dDdx);
+  vec3 nf = normalize(vec3(-g, 1.0));
+  vec3 nWorld = c.axisU.xyz * nf.x + c.axisV.xyz * nf.y + c.axisW.xyz * nf.z;
   return shade(albedo, nWorld, world);
 }
 
-// Anti-aliasing of grooves narrower than two pixels (003 eq. 6): the narrow piece nearest the
-// hit whose capsule the pixel's footprint reaches; grooveSamples rays spread across it over the
-// pixel (weights: the pixel square's chord lengths across the groove's screen direction), each
-// shaded where it lands; their weighted mean is the pixel's colour.
+// Anti-aliasing of grooves narrower than two pixels (003 eq. 6's footprint area ratios, integrated
+// numerically): the narrow piece nearest the hit whose capsule the pixel's footprint reaches;
+// grooveSamples rays spread across it over the pixel (weights: the pixel square's chord lengths
+// across the groove's screen direction), each followed down the groove's profile in its
+// cross-section and shaded where it lands; their weighted mean is the pixel's colour. (Only the
+// nearest groove: where two narrow ones cross inside a pixel, one of them.)
 vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   uint blk = grooveEntry[cell];
   if (!grooveAA || blk == kNoGrooves) return color;
@@ -401,14 +454,17 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   float hi = 0.5 * (abs(q2.x) + abs(q2.y)), lo = 0.5 * abs(abs(q2.x) - abs(q2.y));
   vec3 qf = R * q2.x + U * q2.y;
   vec3 rel = cellRelativeToCamera(c);
-  float t1 = 16.0 * p.hw / max(abs(d.z), 0.02);
+  vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
+  vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
+  float za, zx;
+  vec3 C = vec3(p.a + p.e * s0, gRim(p, s0, 0.0, za, zx));
   vec3 sum = vec3(0.0);
   float wsum = 0.0;
   int n = clamp(grooveSamples, 1, 64);
   for (int k = 0; k < n; ++k) {
     float sg = (-1.0 + (2.0 * float(k) + 1.0) / float(n)) * hi;
     float wt = abs(sg) <= lo ? 1.0 : (hi - abs(sg)) / max(hi - lo, 1e-6);
-    vec3 col = gFootprintSample(c, blk, p, s0, o, normalize(d + qf * (sg * pixelAngle)), rel, t1);
+    vec3 col = gFootprintSample(c, p, C, ra, rx, o, normalize(d + qf * (sg * pixelAngle)), albedo, world);
     if (col.x < 0.0) continue;
     sum += wt * col;
     wsum += wt;

@@ -11,8 +11,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 
+#include "../common/pack_util.h"
 #include "../common/render_util.h"
 #include "grooves/grooves.h"
 #include "modes/grooves/groove_bake.h"
@@ -358,6 +360,81 @@ TEST_F(GroovesGl, CpuCastAgreesWithTheShader) {
   EXPECT_GT(floors, 500u);
   EXPECT_GE(double(agree) / double(both), 0.995);
   EXPECT_LE(coverage, 4u);
+}
+
+}  // namespace
+}  // namespace sa
+
+namespace sa {
+namespace {
+
+// Distance from world point w to the groove's centre line.
+double lineDistance(const Groove& g, const Eigen::Vector3d& w) {
+  double best = INFINITY;
+  for (size_t k = 0; k + 1 < g.line.size(); ++k) {
+    const Eigen::Vector3d a = g.line[k], ab = g.line[k + 1] - a;
+    const double f = ab.squaredNorm() > 0 ? std::clamp((w - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+    best = std::min(best, (a + ab * f - w).norm());
+  }
+  return best;
+}
+
+// A real scan: Igea's carving, its grooves detected in the raw points by the bake. Away from every
+// groove the image is parallax's (up to float rounding: a groove neither detected nor given is never drawn);
+// on them the carved floors change the depth.
+TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
+  test::TempDir dir;
+  PackReader p0;
+  ASSERT_TRUE(test::packShared(dir, "igea/igea.ply", p0, "igea").isOk());
+  const std::string path = dir.file("igea.hfa");
+  std::vector<std::string> report;
+  Status s = bakeModes(path, path, {RenderMode::kGrooves}, report);
+  ASSERT_TRUE(s.isOk()) << s.message();
+  for (const auto& r : report) std::printf("[grooves-gl] igea: %s\n", r.c_str());
+  PackReader p;
+  ASSERT_TRUE(p.open(path).isOk());
+  auto set = grooves::packGrooves(p);
+  ASSERT_TRUE(set.isOk()) << set.status().message();
+  ASSERT_GT(set->grooves.size(), 0u) << "igea's carving has grooves the detection finds (docs/BENCHMARKS.md)";
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  ASSERT_TRUE(r.modeReady(RenderMode::kGrooves));
+  const Eigen::Vector3d origin(p.meta().origin);
+  const Eigen::Vector3d lo = Eigen::Vector3d(p.meta().boundsMin) + origin, hi = Eigen::Vector3d(p.meta().boundsMax) + origin;
+  size_t far = 0, farSame = 0, near = 0, nearChanged = 0;
+  double maxWidth = 0;
+  for (const Groove& g : set->grooves) maxWidth = std::max(maxWidth, g.width);
+  const double margin = 4 * p.meta().sampleSpacing + maxWidth;
+  for (const Camera& cam : orbitCameras(lo, hi, 4, p.viewUp(), 40, 256, 256)) {
+    const FrameResult g = render(r, cam, RenderMode::kGrooves), par = render(r, cam, RenderMode::kParallax);
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const size_t i = size_t(y) * cam.width + x;
+        if (!std::isfinite(par.depth[i])) continue;
+        const Eigen::Vector3d dir = cam.rayDirection(x + 0.5, y + 0.5);
+        const Eigen::Vector3d w = cam.eye + dir * (par.depth[i] / dir.dot(cam.forward()));
+        double dist = INFINITY;
+        for (const Groove& gr : set->grooves) dist = std::min(dist, lineDistance(gr, w) - gr.width / 2);
+        // Beyond the anti-aliasing's reach too (1.5 pixel footprints over the incidence's cosine,
+        // at most 1/0.2).
+        const double footprint = (w - cam.eye).norm() * cam.fovDeg * M_PI / 180 / cam.height;
+        if (dist > margin + 7.5 * footprint) {
+          ++far;
+          // The same march compiled into another program: equal up to float rounding.
+          bool same = std::abs(g.depth[i] - par.depth[i]) <= 1e-6f * par.depth[i];
+          for (int k = 0; k < 3; ++k) same = same && std::abs(int(g.color.rgba[4 * i + k]) - int(par.color.rgba[4 * i + k])) <= 1;
+          farSame += same;
+        } else if (dist < 0) {
+          ++near;
+          nearChanged += !(std::abs(g.depth[i] - par.depth[i]) < 1e-6f * par.depth[i]);
+        }
+      }
+  }
+  std::printf("[grooves-gl] igea: %zu pixels away from the grooves, %zu the same as parallax; %zu on them, %zu changed\n", far,
+              farSame, near, nearChanged);
+  EXPECT_GT(far, 10000u);
+  EXPECT_GE(double(farSame), 0.999 * double(far));
+  EXPECT_GT(nearChanged, 0u);
 }
 
 }  // namespace
