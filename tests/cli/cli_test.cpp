@@ -463,6 +463,47 @@ TEST(Cli, GroovesExportJsonAndCsv) {
   EXPECT_NE(same.err.find("--json"), std::string::npos) << same.err;
 }
 
+// The grooves mode through the binary: pack --modes grooves detects and stores them, info lists
+// the section, render draws them (the image differs from parallax's), pack --grooves FILE takes
+// given ones, bad files fail cleanly with nothing written.
+TEST(Cli, GroovesModePackBakeRender) {
+  test::TempDir d;
+  const SyntheticScan scan = makeGrooveScan(160, 1, 0.1, acceptanceGrooves(160, 1, 0.1), 5);
+  {
+    std::ofstream o(d.file("wall.ply"), std::ios::binary);
+    o << "ply\nformat binary_little_endian 1.0\nelement vertex " << scan.pos.size() / 3
+      << "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+    o.write(reinterpret_cast<const char*>(scan.pos.data()), std::streamsize(scan.pos.size() * sizeof(double)));
+  }
+  const std::string in = d.file("wall.ply"), pack = d.file("wall.hfa");
+  const CmdResult p = runErr("pack " + in + " -o " + pack + " --modes grooves", d.file("err.txt"));
+  ASSERT_EQ(p.code, 0) << p.err;
+  EXPECT_NE(p.err.find("grooves: section GROO"), std::string::npos) << p.err;
+  const CmdResult info = run("info " + pack);
+  EXPECT_NE(info.out.find("grooves   section GROO"), std::string::npos) << info.out;
+  const std::string a = d.file("g.png"), b = d.file("p.png");
+  ASSERT_EQ(run("render " + pack + " --orbit 1 --size 128x128 --mode grooves -o " + a).code, 0);
+  ASSERT_EQ(run("render " + pack + " --orbit 1 --size 128x128 --mode parallax -o " + b).code, 0);
+  EXPECT_NE(bytesOf(a), bytesOf(b));
+  // Given grooves: an export, edited (one groove kept), taken as it is.
+  ASSERT_EQ(run("grooves " + in + " --json " + d.file("all.json") + " --quiet").code, 0);
+  nlohmann::json j = nlohmann::json::parse(bytesOf(d.file("all.json")));
+  ASSERT_GE(j["grooves"].size(), 2u);
+  j["grooves"] = nlohmann::json::array({j["grooves"][0]});
+  test::writeText(d.file("one.json"), j.dump());
+  const CmdResult g = runErr("pack " + in + " -o " + pack + " --grooves " + d.file("one.json"), d.file("err3.txt"));
+  ASSERT_EQ(g.code, 0) << g.err;
+  EXPECT_NE(g.err.find("1 grooves (1 given with their profiles"), std::string::npos) << g.err;
+  // Bad input: a missing file, a broken one; the pack is left as it was.
+  const std::string before = bytesOf(pack);
+  EXPECT_EQ(run("pack " + in + " -o " + pack + " --grooves " + d.file("missing.json")).code, 2);
+  test::writeText(d.file("bad.json"), "{\"grooves\": [{\"width\": 2}]}");
+  const CmdResult bad = runErr("bake " + pack + " --mode grooves --grooves " + d.file("bad.json"), d.file("err4.txt"));
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_NE(bad.err.find("bad.json"), std::string::npos) << bad.err;
+  EXPECT_EQ(bytesOf(pack), before);
+}
+
 TEST(Cli, OutputsNeverOverwriteInputs) {
   test::TempDir d;
   const std::string scan = d.file("scan.ply");
