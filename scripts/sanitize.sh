@@ -5,6 +5,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh
+# ccache keyed on paths relative to the checkout: another clone of the same sources (CI's fresh
+# one) hits the cache instead of rebuilding everything.
+export CCACHE_BASEDIR="$PWD" CCACHE_NOHASHDIR=1
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSCANATLAS_SANITIZE=ON >/dev/null
 cmake --build build-asan -j"${JOBS:-2}"
 cd build-asan
