@@ -30,20 +30,34 @@ int binCoord(double x, double lo, double hi, int g) {
   return std::clamp(int(std::floor((x - lo) / (hi - lo) * g)), 0, g - 1);
 }
 
-// Piece p's lips from the height field (wA, wB: the line's own heights at its ends).
-void measureLips(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
-  p.lip = p.halfWidth + texelOf(c);
-  const Eigen::Vector2d n = across(p);
-  for (int end = 0; end < 2; ++end) {
-    const Eigen::Vector2d base = p.a + p.e * (end ? p.length : 0.0);
-    const Eigen::Vector2d l = base - n * p.lip, r = base + n * p.lip;
-    double hl = exact::surfaceHeight(pack, c, l.x(), l.y()), hr = exact::surfaceHeight(pack, c, r.x(), r.y());
-    if (std::isnan(hl) && std::isnan(hr)) hl = hr = end ? wB : wA;
-    else if (std::isnan(hl)) hl = hr;
-    else if (std::isnan(hr)) hr = hl;
-    p.lips[2 * end] = hl;
-    p.lips[2 * end + 1] = hr;
+// The surface's gradient (d w / d(u, v)) at q from the height field `reach` around it (central
+// differences; one-sided where a side is uncovered, 0 along an axis with neither).
+Eigen::Vector2d surfaceGradient(const PackReader& pack, const CellRecord& c, const Eigen::Vector2d& q, double reach) {
+  Eigen::Vector2d g = Eigen::Vector2d::Zero();
+  const double h0 = exact::surfaceHeight(pack, c, q.x(), q.y());
+  for (int a = 0; a < 2; ++a) {
+    Eigen::Vector2d off = Eigen::Vector2d::Zero();
+    off[a] = reach;
+    const Eigen::Vector2d qp = q + off, qm = q - off;
+    const double hp = exact::surfaceHeight(pack, c, qp.x(), qp.y()), hm = exact::surfaceHeight(pack, c, qm.x(), qm.y());
+    if (!std::isnan(hp) && !std::isnan(hm)) g[a] = (hp - hm) / (2 * reach);
+    else if (!std::isnan(hp) && !std::isnan(h0)) g[a] = (hp - h0) / reach;
+    else if (!std::isnan(hm) && !std::isnan(h0)) g[a] = (h0 - hm) / reach;
   }
+  return g;
+}
+
+// Piece p's rim: the line's own heights at its ends (wA, wB: the line lies at the rim, as
+// detection and measurement put it; shared with the neighbouring pieces) and the surface's
+// gradient there.
+void measureRim(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
+  // Past the reach of the pack's reconstruction (splat and smoothing blur a crack over about two
+  // sample spacings), so the gradient is the surface's, not the blurred crack's.
+  p.lip = p.halfWidth + texelOf(c) + 2 * pack.meta().sampleSpacing;
+  p.rimW[0] = wA;
+  p.rimW[1] = wB;
+  p.rimG[0] = surfaceGradient(pack, c, p.a, p.lip);
+  p.rimG[1] = surfaceGradient(pack, c, p.a + p.e * p.length, p.lip);
 }
 
 // Whether the groove's segment A-B (frame) lies on cell c's surface: at one of a few points along
@@ -59,10 +73,11 @@ bool onSurface(const PackReader& pack, const CellRecord& c, const Eigen::Vector3
   return false;
 }
 
-// The lowest point of piece p's floor over its capsule: its lowest lip less the profile's deepest
+// The lowest point of piece p's floor over its capsule: its lowest rim less the profile's deepest
 // sample.
 double lowestFloor(const Piece& p, const float* profile) {
-  return *std::min_element(p.lips, p.lips + 4) - *std::max_element(profile, profile + kProfileSamples);
+  return std::min(p.rimW[0], p.rimW[1]) - std::max(p.rimG[0].norm(), p.rimG[1].norm()) * p.lip -
+         *std::max_element(profile, profile + kProfileSamples);
 }
 
 // How far piece p's floor rises above the height field over its capsule (samples half a texel
@@ -70,15 +85,14 @@ double lowestFloor(const Piece& p, const float* profile) {
 double riseOver(const PackReader& pack, const CellRecord& c, const Model& m, const Piece& p) {
   const HeightField h{&pack, &c};
   const double step = 0.5 * texelOf(c);
-  const int ns = std::clamp(int(std::ceil((p.length + 2 * p.halfWidth) / step)), 1, 4096);
-  const int nx = std::clamp(int(std::ceil(2 * p.halfWidth / step)), 1, 4096);
+  const int ns = std::clamp(int(std::ceil((p.length + 2 * p.lip) / step)), 1, 4096);
+  const int nx = std::clamp(int(std::ceil(2 * p.lip / step)), 1, 4096);
   double rise = 0;
   for (int i = 0; i <= ns; ++i)
     for (int j = 0; j <= nx; ++j) {
-      const Eigen::Vector2d q = p.a + p.e * (-p.halfWidth + (p.length + 2 * p.halfWidth) * i / ns) +
-                                across(p) * (-p.halfWidth + 2 * p.halfWidth * j / nx);
+      const Eigen::Vector2d q = p.a + p.e * (-p.lip + (p.length + 2 * p.lip) * i / ns) + across(p) * (-p.lip + 2 * p.lip * j / nx);
       double s, x;
-      if (pieceDistance(p, q, s, x) >= p.halfWidth) continue;
+      if (pieceDistance(p, q, s, x) >= p.lip) continue;
       const double hq = h(q.x(), q.y());
       if (!std::isnan(hq)) rise = std::max(rise, pieceFloor(m, h, p, q) - hq);
     }
@@ -91,12 +105,12 @@ void binPieces(const CellRecord& c, CellPieces& cp) {
   for (uint32_t i = 0; i < cp.pieces.size(); ++i) {
     const Piece& p = cp.pieces[i];
     const Eigen::Vector2d b = p.a + p.e * p.length;
-    const Eigen::Vector2d lo = p.a.cwiseMin(b).array() - p.halfWidth, hi = p.a.cwiseMax(b).array() + p.halfWidth;
+    const Eigen::Vector2d lo = p.a.cwiseMin(b).array() - p.lip, hi = p.a.cwiseMax(b).array() + p.lip;
     const int x0 = binCoord(lo.x(), c.box[0], c.box[1], g), x1 = binCoord(hi.x(), c.box[0], c.box[1], g);
     const int y0 = binCoord(lo.y(), c.box[2], c.box[3], g), y1 = binCoord(hi.y(), c.box[2], c.box[3], g);
     // Only bins the capsule reaches: the bin's centre within the half width plus half the bin's
     // diagonal of the segment (a long diagonal piece's box holds many bins it never touches).
-    const double bw = (c.box[1] - c.box[0]) / g, bh = (c.box[3] - c.box[2]) / g, reach = p.halfWidth + 0.5 * std::hypot(bw, bh);
+    const double bw = (c.box[1] - c.box[0]) / g, bh = (c.box[3] - c.box[2]) / g, reach = p.lip + 0.5 * std::hypot(bw, bh);
     for (int y = y0; y <= y1; ++y)
       for (int x = x0; x <= x1; ++x) {
         const Eigen::Vector2d centre(c.box[0] + (x + 0.5) * bw, c.box[2] + (y + 0.5) * bh);
@@ -188,7 +202,7 @@ Model buildModel(const PackReader& pack, const GrooveSet& set) {
           p.e = p.length > 1e-12 ? Eigen::Vector2d(ab / p.length) : Eigen::Vector2d::UnitX();
           p.halfWidth = hw;
           p.groove = gi;
-          measureLips(pack, c, p, P.z(), Q.z());
+          measureRim(pack, c, p, P.z(), Q.z());
           per[ci].pieces.push_back(p);
         }
         placed = true;
@@ -240,7 +254,8 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
     }
     for (const auto& b : cp.bins) words.insert(words.end(), b.begin(), b.end());
     for (const Piece& p : cp.pieces) {
-      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.lips[0], p.lips[1], p.lips[2], p.lips[3]})
+      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.rimW[0], p.rimG[0].x(), p.rimG[0].y(),
+                       p.rimW[1], p.rimG[1].x(), p.rimG[1].y()})
         put(float(v));
       words.push_back(p.groove * kProfileSamples);
       put(float(p.lip));
@@ -304,7 +319,7 @@ Result<SectionView> readSection(const PackReader& pack) {
         if (v.words[b + lo + s + q] >= n) return Status::badInput(where + "cell " + std::to_string(i) + ": a bin names a piece it lacks");
     }
     for (uint32_t q = 0; q < n; ++q)
-      if (uint64_t(v.words[b + po + q * kPieceWords + 10]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
+      if (uint64_t(v.words[b + po + q * kPieceWords + 12]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
         return Status::badInput(where + "cell " + std::to_string(i) + ": a piece names a profile it lacks");
   }
   v.json.assign(reinterpret_cast<const char*>(v.words + W), h.jsonBytes);
@@ -345,9 +360,12 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
       p.e = {f(w + 2), f(w + 3)};
       p.length = f(w + 4);
       p.halfWidth = f(w + 5);
-      for (int k = 0; k < 4; ++k) p.lips[k] = f(w + 6 + k);
-      p.groove = v.words[w + 10] / kProfileSamples;
-      p.lip = f(w + 11);
+      p.rimW[0] = f(w + 6);
+      p.rimG[0] = {f(w + 7), f(w + 8)};
+      p.rimW[1] = f(w + 9);
+      p.rimG[1] = {f(w + 10), f(w + 11)};
+      p.groove = v.words[w + 12] / kProfileSamples;
+      p.lip = f(w + 13);
       cp.pieces.push_back(p);
     }
     m.cellIndex[i] = int32_t(m.cells.size());
@@ -379,43 +397,58 @@ double profileDepth(const float* profile, double r, double halfWidth, double* sl
 double HeightField::operator()(double u, double v) const { return exact::surfaceHeight(*pack, *cell, u, v); }
 double HeightField::texel() const { return texelOf(*cell); }
 
-double pieceRim(const Piece& p, double s, double x, double* slopeAlong, double* slopeAcross) {
-  const double fs = p.length > 0 ? std::clamp(s / p.length, 0.0, 1.0) : 0.0, fx = (x + p.lip) / (2 * p.lip);
-  const double l = p.lips[0] + (p.lips[2] - p.lips[0]) * fs, r = p.lips[1] + (p.lips[3] - p.lips[1]) * fs;
-  if (slopeAcross) *slopeAcross = (r - l) / (2 * p.lip);
-  if (slopeAlong) {
-    const double a0 = p.lips[0] + (p.lips[1] - p.lips[0]) * fx, a1 = p.lips[2] + (p.lips[3] - p.lips[2]) * fx;
-    *slopeAlong = p.length > 0 && s > 0 && s < p.length ? (a1 - a0) / p.length : 0.0;
+double pieceRim(const Piece& p, double s, double x, Eigen::Vector2d* gradient) {
+  const double sc = std::clamp(s, 0.0, p.length), fs = p.length > 0 ? sc / p.length : 0.0;
+  const Eigen::Vector2d g = p.rimG[0] + (p.rimG[1] - p.rimG[0]) * fs;
+  const double w = p.rimW[0] + (p.rimW[1] - p.rimW[0]) * fs;
+  if (gradient) {
+    *gradient = g;
+    // Along the segment the line's own slope.
+    if (p.length > 0 && s > 0 && s < p.length) *gradient += p.e * ((p.rimW[1] - p.rimW[0]) / p.length - g.dot(p.e));
   }
-  return l + (r - l) * fx;
+  return w + g.dot(p.e * (s - sc) + across(p) * x);
+}
+
+double smoothSlope(const float* profile, double r, double halfWidth) {
+  if (!(r < halfWidth)) return 0;
+  const int n = kProfileSamples - 1;
+  auto facet = [&](int k) { return (double(profile[k + 1]) - profile[k]) * n / halfWidth; };
+  const double f = std::max(r, 0.0) / halfWidth * n - 0.5;  // facet centres at integers
+  if (f <= 0) return facet(0);
+  if (f >= n - 1) return facet(n - 1);
+  const int k = int(f);
+  return facet(k) + (facet(k + 1) - facet(k)) * (f - k);
 }
 
 double pieceFloor(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector2d& q, Eigen::Vector2d* gradient) {
-  (void)h;
   double s, x;
   const double r = pieceDistance(p, q, s, x);
-  double slope = 0, along = 0, across_ = 0;
-  const double D = profileDepth(&m.profiles[size_t(p.groove) * kProfileSamples], r, p.halfWidth, &slope);
-  const double rim = pieceRim(p, s, x, &along, &across_);
+  double slope = 0;
+  const float* profile = &m.profiles[size_t(p.groove) * kProfileSamples];
+  const double D = profileDepth(profile, r, p.halfWidth, &slope);
+  Eigen::Vector2d g;
+  const double rim = pieceRim(p, s, x, &g);
   if (gradient) {
-    Eigen::Vector2d g = p.e * along + across(p) * across_;
-    if (r > 0 && D > 0) {
+    if (r > 0 && r < p.halfWidth) {
       const Eigen::Vector2d c = p.a + p.e * std::clamp(s, 0.0, p.length);
-      g -= slope * (q - c) / r;
+      g -= smoothSlope(profile, r, p.halfWidth) * (q - c) / r;
     }
     *gradient = g;
   }
+  (void)h;
   return rim - D;
 }
 
 namespace {
 
 // Where the 2-D line q + t dq (at t, inside the capsule) leaves piece p's capsule.
-double capsuleExit(const Piece& p, const Eigen::Vector2d& q, const Eigen::Vector2d& dq, double t) {
+// Where the 2-D line q + t dq meets piece p's capsule (out to its lips): entry, exit (entry >= exit
+// when it misses).
+std::pair<double, double> capsuleSpan(const Piece& p, const Eigen::Vector2d& q, const Eigen::Vector2d& dq) {
   const double inf = std::numeric_limits<double>::infinity();
-  const double hw = p.halfWidth;
-  double exit = -inf;
-  // The body: s in [0, L], |x| < hw.
+  const double hw = p.lip;
+  double entry = inf, exit = -inf;
+  // The body: s in [0, L], |x| < lip.
   const Eigen::Vector2d n = across(p);
   const double s0 = (q - p.a).dot(p.e), sd = dq.dot(p.e), x0 = (q - p.a).dot(n), xd = dq.dot(n);
   auto slab = [&](double v0, double vd, double lo, double hi, double& tin, double& tout) {
@@ -431,19 +464,25 @@ double capsuleExit(const Piece& p, const Eigen::Vector2d& q, const Eigen::Vector
   double tin = -inf, tout = inf;
   slab(s0, sd, 0, p.length, tin, tout);
   slab(x0, xd, -hw, hw, tin, tout);
-  if (tin < tout) exit = std::max(exit, tout);
+  if (tin < tout) entry = std::min(entry, tin), exit = std::max(exit, tout);
   for (const Eigen::Vector2d& c : {p.a, Eigen::Vector2d(p.a + p.e * p.length)}) {
     const Eigen::Vector2d r = q - c;
     const double A = dq.squaredNorm(), B = r.dot(dq), C = r.squaredNorm() - hw * hw;
     if (A < 1e-300) {
-      if (C < 0) exit = inf;
+      if (C < 0) entry = -inf, exit = inf;
       continue;
     }
     const double disc = B * B - A * C;
     if (disc <= 0) continue;
+    entry = std::min(entry, (-B - std::sqrt(disc)) / A);
     exit = std::max(exit, (-B + std::sqrt(disc)) / A);
   }
-  return t + std::max(exit, 0.0);
+  return {entry, exit};
+}
+
+// Where the 2-D line q + t dq (at t, inside the capsule) leaves piece p's capsule.
+double capsuleExit(const Piece& p, const Eigen::Vector2d& q, const Eigen::Vector2d& dq, double t) {
+  return t + std::max(capsuleSpan(p, q, dq).second, 0.0);
 }
 
 }  // namespace
@@ -486,12 +525,25 @@ bool cover(const Model& m, const HeightField& h, const CellPieces& cp, const Eig
   for (uint32_t i : cp.bins[size_t(by) * g + bx]) {
     const Piece& p = cp.pieces[i];
     double s, x;
-    if (pieceDistance(p, q.head<2>(), s, x) >= p.halfWidth) continue;
+    if (pieceDistance(p, q.head<2>(), s, x) >= p.lip) continue;
     const double f = pieceFloor(m, h, p, q.head<2>());
     if (q.z() > f) air = int(i);
     if (f < low) low = f, lowest = int(i);
   }
   return lowest >= 0;
+}
+
+double floorCrossing(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                     double t0, double t1) {
+  const auto [en, ex] = capsuleSpan(p, o.head<2>(), d.head<2>());
+  const double a = std::max(t0, en), b = std::min(t1, ex);
+  if (!(a < b)) return -1;
+  const Eigen::Vector3d qa = o + d * a;
+  if (qa.z() <= pieceFloor(m, h, p, qa.head<2>())) return a;
+  const double te = airExit(m, h, p, o, d, a, b);
+  const Eigen::Vector3d qe = o + d * te;
+  double s, x;
+  return te < b && pieceDistance(p, qe.head<2>(), s, x) < p.lip && qe.z() <= pieceFloor(m, h, p, qe.head<2>()) ? te : -1;
 }
 
 bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, uint32_t cell, const Eigen::Vector3d& o,
@@ -511,52 +563,45 @@ bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, ui
   double t = t0;
   int piece = -1, air, lowest;
   bool found = false;
-  auto solid = [&](double tt) { return cover(m, hf, *cp, o + d * tt, air, lowest) && air < 0; };
   for (uint32_t it = 0; it < 8 && !found; ++it) {
     out.iterations = it + 1;
     double th;
     const bool hh = exact::traceCellLinear(pack, c, o, d, t, t1, th);
     const double tH = hh ? th : t1;
-    // A floor above the height field before tH.
+    // A floor above the height field before tH: each piece near the stretch's ends (the bins hold
+    // the pieces near them), its first floor crossing inside its capsule over the stretch.
     const double ta = std::max(t, tH - window);
-    double tPrev = t;
-    // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces near them).
     const double reach = d.head<2>().norm() * (tH - ta);
-    auto near = [&](double tt) {
-      const Eigen::Vector3d q = o + d * tt;
+    double best = std::numeric_limits<double>::infinity();
+    for (int e = 0; e < (cp->rise > 0 ? 2 : 0); ++e) {
+      const Eigen::Vector3d qe = o + d * (e == 0 ? tH : ta);
       const int g = cp->grid;
-      const int bx = binCoord(q.x(), c.box[0], c.box[1], g), by = binCoord(q.y(), c.box[2], c.box[3], g);
+      const int bx = binCoord(qe.x(), c.box[0], c.box[1], g), by = binCoord(qe.y(), c.box[2], c.box[3], g);
       for (uint32_t i : cp->bins[size_t(by) * g + bx]) {
+        const Piece& p = cp->pieces[i];
         double s, x;
-        if (pieceDistance(cp->pieces[i], q.head<2>(), s, x) < cp->pieces[i].halfWidth + reach) return true;
+        if (pieceDistance(p, qe.head<2>(), s, x) >= p.lip + reach) continue;
+        const double tc = floorCrossing(m, hf, p, o, d, ta, std::min(tH, best));
+        if (tc >= 0) best = std::min(best, tc);
       }
-      return false;
-    };
-    const bool close = cp->rise > 0 && (near(tH) || near(ta));
-    for (int k = 0; k <= 8 && !found && close; ++k) {
-      double tk = ta + (tH - ta) * k / 8.0;
-      if (!solid(tk)) {
-        tPrev = tk;
-        continue;
-      }
-      for (int j = 0; j < 30; ++j) {
-        const double tm = 0.5 * (tPrev + tk);
-        if (solid(tm)) tk = tm;
-        else tPrev = tm;
-      }
-      solid(tk);
-      t = tk;
-      piece = lowest;
-      found = true;
     }
-    if (found || !hh) break;
-    t = tH;
+    if (best < tH) {
+      t = best;  // on a floor: solid unless in another groove's air (the advance below goes on)
+      if (cover(m, hf, *cp, o + d * t, air, lowest) && air < 0) {
+        piece = lowest;
+        found = true;
+        break;
+      }
+    }
+    if (found || (!hh && !(best < tH))) break;
+    const bool fromFloor = best < tH;
+    if (!fromFloor) t = tH;
     bool onward = false;
     for (int j = 0; j < 16; ++j) {
       const Eigen::Vector3d q = o + d * t;
       if (!cover(m, hf, *cp, q, air, lowest)) {
         const double h = hf(q.x(), q.y());
-        if (j == 0 || (!std::isnan(h) && q.z() <= h + eps)) found = true;
+        if ((j == 0 && !fromFloor) || (!std::isnan(h) && q.z() <= h + eps)) found = true;
         else onward = true;
         break;
       }

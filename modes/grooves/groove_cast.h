@@ -4,13 +4,15 @@
 // height field at the groove's lips, and the groove's cross-section profile - binned in a uniform
 // grid over the cell's tile, and the cast that carves them into the height field.
 //
-// The carved surface: inside a piece's capsule (r < its half width, r the distance to its
-// segment: ends are rounded, joints and crossings are the union of the grooves) the lowest floor
-// there, floor_i = rim_i - D_i(r), the rim from the height field at the groove's lips and D the
-// profile; elsewhere the cell's height field h. The data's own crack in h (blurred by the pack's
+// The carved surface: inside a piece's capsule (r < its lip, r the distance to its segment, the
+// lip half a width plus a texel and two sample spacings: ends are rounded, joints and crossings
+// are the union of the grooves) the lowest floor there, floor_i = rim_i - D_i(r), the rim from
+// the height field at the groove's lips and D the profile (0 past the half width); elsewhere the
+// cell's height field h. At the capsule's edge the rim (the tangent plane at the line) meets h to
+// first order. The data's own crack in h (blurred by the pack's
 // reconstruction, wider and shallower than the profile) is replaced, not deepened. The cast
-// (castGrooved): h's first hit tH; a floor above h crossed before tH (sampled over the stretch
-// that can reach the floors); from tH, through the air of whatever piece the ray is in (to that
+// (castGrooved): h's first hit tH; a floor above h crossed before tH (each piece near the stretch
+// that can reach such floors: its first floor crossing); from tH, through the air of whatever piece the ray is in (to that
 // piece's floor or out of its capsule) until solid; out of every capsule and above h, on from
 // there. A groove that was neither detected nor given is never drawn: cells without pieces cast
 // their height field alone.
@@ -30,7 +32,7 @@ namespace sa::gcast {
 // Profile depth samples per groove: D at r = k / (kProfileSamples - 1) half widths, k = 0..8
 // (the last is 0: the rim), linear in between.
 inline constexpr int kProfileSamples = 9;
-inline constexpr int kPieceWords = 12;
+inline constexpr int kPieceWords = 14;
 inline constexpr int kBlockHeaderWords = 6;  // grid, pieces, lists' word, pieces' word, floor, rise (f32)
 inline constexpr int kMaxGrid = 256;
 inline constexpr double kMaxPieceTexels = 8;
@@ -38,12 +40,14 @@ inline constexpr double kMaxPieceTexels = 8;
 struct Piece {
   Eigen::Vector2d a = Eigen::Vector2d::Zero(), e = Eigen::Vector2d::UnitX();  // start and unit direction (u, v)
   double length = 0, halfWidth = 0;
-  // The rim: the height field at the lips, half a width plus a texel to each side of the line
-  // (x = -lip, +lip across, along (-e.y, e.x)), at the start and the end: left and right at s = 0,
-  // then at s = length; bilinear in between (one side's where the other is uncovered, the line's
-  // own height where both are).
-  double lips[4] = {0, 0, 0, 0};
-  double lip = 0;  // the lips' offset from the line
+  // The rim: at the start and the end, the line's own height (the line lies at the rim level;
+  // shared by neighbouring pieces) and the surface's gradient (d w / d(u, v)) there, from the
+  // height field half a width plus a texel and two sample spacings around the point (past the
+  // reach of the reconstruction's blur of the crack); in between linear. rim(q) = w(c) + g(c).(q - c),
+  // c the segment's point closest to q: the surface's tangent plane at the line.
+  double rimW[2] = {0, 0};
+  Eigen::Vector2d rimG[2] = {Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
+  double lip = 0;  // the capsule's radius: half a width, a texel and two sample spacings
   uint32_t groove = 0;  // its profile
 };
 
@@ -123,16 +127,23 @@ struct HeightField {
   double operator()(double u, double v) const;
   double texel() const;
 };
-// The rim at (s, x): the piece's lips, bilinear (clamped along), so the groove's edges meet the
-// surface; slopes: d rim / ds and d rim / dx.
-double pieceRim(const Piece& p, double s, double x, double* slopeAlong = nullptr, double* slopeAcross = nullptr);
-// floor_i at (u, v) (the rim where r >= half width); gradient: d floor / d(u, v).
+// The rim at the point (s, x) of the piece's frame; gradient: d rim / d(u, v) (shading).
+double pieceRim(const Piece& p, double s, double x, Eigen::Vector2d* gradient = nullptr);
+// The profile's slope for shading at r: linear between its facets' centres (the geometry keeps the
+// facets; the shading does not show them as bands).
+double smoothSlope(const float* profile, double r, double halfWidth);
+// floor_i at (u, v): rim - D(r) (D = 0 past the half width: out to the lip the rim replaces the
+// data's blurred crack); gradient (shading): d floor / d(u, v) with the smooth slope.
 double pieceFloor(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector2d& q,
                   Eigen::Vector2d* gradient = nullptr);
 // Where the ray o + t d, inside piece p's air at t, leaves it: a point on or under its floor
 // (f <= 0), or just out of its capsule, at most t1.
 double airExit(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
                double t, double t1);
+// The first t in [t0, t1] where the ray is on or under piece p's floor inside its capsule (its
+// entry if it enters under the floor), -1 when none.
+double floorCrossing(const Model& m, const HeightField& h, const Piece& p, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                     double t0, double t1);
 // Whether frame point q lies in a capsule of cell cp's pieces; air: a piece whose floor q is above
 // (-1: q is solid); lowest: the piece with the lowest floor over q.
 bool cover(const Model& m, const HeightField& h, const CellPieces& cp, const Eigen::Vector3d& q, int& air, int& lowest);

@@ -36,23 +36,24 @@ const uint kNoGrooves = 0xffffffffu;
 struct GPiece {
   vec2 a, e;      // start, unit direction (frame u, v)
   float len, hw;  // length, half width
-  vec4 lips;      // the height field at the lips: left, right at s = 0, then at s = len
-  float lip;      // the lips' offset across
+  vec3 rim0, rim1; // the rim at s = 0 and s = len: the line's height, the surface's gradient
+  float lip;      // the capsule's radius (half a width, a texel and two sample spacings)
   uint prof;      // first word of its profile (9 depths)
 };
 
 float gWordF(uint w) { return uintBitsToFloat(grooveWord[w]); }
 
 GPiece gPiece(uint blk, uint i) {
-  uint w = blk + grooveWord[blk + 3u] + i * 12u;
+  uint w = blk + grooveWord[blk + 3u] + i * 14u;
   GPiece p;
   p.a = vec2(gWordF(w), gWordF(w + 1u));
   p.e = vec2(gWordF(w + 2u), gWordF(w + 3u));
   p.len = gWordF(w + 4u);
   p.hw = gWordF(w + 5u);
-  p.lips = vec4(gWordF(w + 6u), gWordF(w + 7u), gWordF(w + 8u), gWordF(w + 9u));
-  p.prof = grooveWord[w + 10u];
-  p.lip = gWordF(w + 11u);
+  p.rim0 = vec3(gWordF(w + 6u), gWordF(w + 7u), gWordF(w + 8u));
+  p.rim1 = vec3(gWordF(w + 9u), gWordF(w + 10u), gWordF(w + 11u));
+  p.prof = grooveWord[w + 12u];
+  p.lip = gWordF(w + 13u);
   return p;
 }
 
@@ -74,40 +75,57 @@ float gDepth(uint prof, float r, float hw, out float slope) {
   return mix(d0, d1, f - float(k));
 }
 
-// The rim at (s, x) (groove_cast.cpp pieceRim): the piece's lips, bilinear (clamped along), so
-// the groove's edges meet the surface.
-float gRim(GPiece p, float s, float x, out float along, out float across) {
-  float fs = p.len > 0.0 ? clamp(s / p.len, 0.0, 1.0) : 0.0, fx = (x + p.lip) / (2.0 * p.lip);
-  float l = mix(p.lips.x, p.lips.z, fs), r = mix(p.lips.y, p.lips.w, fs);
-  across = (r - l) / (2.0 * p.lip);
-  along = p.len > 0.0 && s > 0.0 && s < p.len ? (mix(p.lips.z, p.lips.w, fx) - mix(p.lips.x, p.lips.y, fx)) / p.len : 0.0;
-  return mix(l, r, fx);
+// The rim at the point (s, x) of the piece's frame (groove_cast.cpp pieceRim): the surface's
+// tangent plane at the segment's closest point c, w(c) + g(c).(q - c), both linear along the
+// piece; grad: its gradient (shading).
+float gRim(GPiece p, float s, float x, out vec2 grad) {
+  float sc = clamp(s, 0.0, p.len), fs = p.len > 0.0 ? sc / p.len : 0.0;
+  vec3 r = mix(p.rim0, p.rim1, fs);
+  grad = r.yz;
+  if (p.len > 0.0 && s > 0.0 && s < p.len) grad += p.e * ((p.rim1.x - p.rim0.x) / p.len - dot(r.yz, p.e));
+  return r.x + dot(r.yz, p.e * (s - sc) + vec2(-p.e.y, p.e.x) * x);
 }
 
-float gFloor(GPiece p, vec2 q) {
-  float s, x, sl, sa, sx;
+// The profile's slope for shading at r (groove_cast.cpp smoothSlope): linear between its facets'
+// centres.
+float gSmoothSlope(uint prof, float r, float hw) {
+  if (!(r < hw)) return 0.0;
+  float f = max(r, 0.0) / hw * 8.0 - 0.5;
+  int k = clamp(int(floor(f)), 0, 6);
+  float s0 = (gWordF(prof + uint(k) + 1u) - gWordF(prof + uint(k))) * 8.0 / hw;
+  float s1 = (gWordF(prof + uint(k) + 2u) - gWordF(prof + uint(k) + 1u)) * 8.0 / hw;
+  return mix(s0, s1, clamp(f - float(k), 0.0, 1.0));
+}
+
+// rim - D(r); past the half width (D = 0) out to the lip the rim, which replaces the data's
+// blurred crack there and meets the height field at the capsule's edge to first order.
+float gFloor(Cell c, GPiece p, vec2 q) {
+  float s, x, sl;
+  vec2 gr;
   float r = gDist(p, q, s, x);
-  return gRim(p, s, x, sa, sx) - gDepth(p.prof, r, p.hw, sl);
+  float rim = gRim(p, s, x, gr);
+  return rim - gDepth(p.prof, r, p.hw, sl);
 }
 
-// The facet normal (frame) of the floor at q.
+// The floor's shading normal (frame) at q, smooth across the profile's facets; the rim's past the
+// half width (the height field's normals there are those of the data's blurred crack).
 vec3 gNormal(GPiece p, vec2 q) {
-  float s, x, sl, sa, sx;
+  float s, x;
+  vec2 g;
   float r = gDist(p, q, s, x);
-  float D = gDepth(p.prof, r, p.hw, sl);
-  gRim(p, s, x, sa, sx);
-  vec2 g = p.e * sa + vec2(-p.e.y, p.e.x) * sx;
-  if (r > 0.0 && D > 0.0) g -= sl * (q - (p.a + p.e * clamp(s, 0.0, p.len))) / r;
+  gRim(p, s, x, g);
+  if (r > 0.0 && r < p.hw) g -= gSmoothSlope(p.prof, r, p.hw) * (q - (p.a + p.e * clamp(s, 0.0, p.len))) / r;
   return normalize(vec3(-g, 1.0));
 }
 
-// Where the 2-D line q + t dq (inside the capsule at t = 0) leaves it.
-float gCapsuleExit(GPiece p, vec2 q, vec2 dq) {
-  float ex = -1e30;
+// Where the 2-D line q + t dq meets piece p's capsule (out to the lips): [entry, exit], entry >=
+// exit when it misses.
+vec2 gCapsuleSpan(GPiece p, vec2 q, vec2 dq) {
+  float en = 1e30, ex = -1e30;
   vec2 n = vec2(-p.e.y, p.e.x);
   vec2 r = q - p.a;
   vec2 v0 = vec2(dot(r, p.e), dot(r, n)), vd = vec2(dot(dq, p.e), dot(dq, n));
-  vec2 lo = vec2(0.0, -p.hw), hi = vec2(p.len, p.hw);
+  vec2 lo = vec2(0.0, -p.lip), hi = vec2(p.len, p.lip);
   float tin = -1e30, tout = 1e30;
   for (int k = 0; k < 2; ++k) {
     if (abs(vd[k]) < 1e-30) {
@@ -118,42 +136,51 @@ float gCapsuleExit(GPiece p, vec2 q, vec2 dq) {
     tin = max(tin, min(ta, tb));
     tout = min(tout, max(ta, tb));
   }
-  if (tin < tout) ex = max(ex, tout);
+  if (tin < tout) {
+    en = min(en, tin);
+    ex = max(ex, tout);
+  }
   for (int k = 0; k < 2; ++k) {
     vec2 c = k == 0 ? p.a : p.a + p.e * p.len;
     vec2 rc = q - c;
-    float A = dot(dq, dq), B = dot(rc, dq), C = dot(rc, rc) - p.hw * p.hw;
+    float A = dot(dq, dq), B = dot(rc, dq), C = dot(rc, rc) - p.lip * p.lip;
     if (A < 1e-30) {
-      if (C < 0.0) ex = 1e30;
+      if (C < 0.0) { en = -1e30; ex = 1e30; }
       continue;
     }
     float disc = B * B - A * C;
-    if (disc > 0.0) ex = max(ex, (-B + sqrt(disc)) / A);
+    if (disc > 0.0) {
+      en = min(en, (-B - sqrt(disc)) / A);
+      ex = max(ex, (-B + sqrt(disc)) / A);
+    }
   }
-  return max(ex, 0.0);
+  return vec2(en, ex);
 }
+
+// Where the 2-D line q + t dq (inside the capsule at t = 0) leaves it.
+float gCapsuleExit(GPiece p, vec2 q, vec2 dq) { return max(gCapsuleSpan(p, q, dq).y, 0.0); }
 
 // The ray inside piece p's air at t: where it meets the floor (a point on or under it), or just
 // past the capsule's edge, at most t1.
-float gAirExit(GPiece p, vec3 o, vec3 d, float t, float t1) {
+float gAirExit(Cell c, GPiece p, vec3 o, vec3 d, float t, float t1) {
   vec3 q0 = o + d * t;
   float te = t + gCapsuleExit(p, q0.xy, d.xy);
   float tEnd = min(te, t1);
-  float ta = t, fa = q0.z - gFloor(p, q0.xy);
+  float ta = t, fa = q0.z - gFloor(c, p, q0.xy);
   for (int i = 1; i <= 16; ++i) {
     float tb = t + (tEnd - t) * float(i) / 16.0;
     vec3 qb = o + d * tb;
-    float fb = qb.z - gFloor(p, qb.xy);
+    float fb = qb.z - gFloor(c, p, qb.xy);
     if (fb <= 0.0) {
       for (int k = 0; k < 14; ++k) {
         float tm = 0.5 * (ta + tb);
         vec3 qm = o + d * tm;
-        float fm = qm.z - gFloor(p, qm.xy);
+        float fm = qm.z - gFloor(c, p, qm.xy);
         if (fm > 0.0) { ta = tm; fa = fm; } else { tb = tm; fb = fm; }
       }
       float ts = fa > fb ? ta + (tb - ta) * fa / (fa - fb) : tb;
       vec3 qs = o + d * ts;
-      return qs.z - gFloor(p, qs.xy) <= 0.0 ? ts : tb;
+      return qs.z - gFloor(c, p, qs.xy) <= 0.0 ? ts : tb;
     }
     ta = tb;
     fa = fb;
@@ -168,8 +195,8 @@ int gBin(Cell c, uint blk, vec2 q) {
   return b.y * G + b.x;
 }
 
-// Whether q lies in any piece's capsule (there the surface is the lowest floor over q, the height
-// field is not); air: a piece whose floor q is above (-1: none, q is solid); lowest: the piece
+// Whether q lies in any piece's capsule (out to its lips: there the surface is the lowest floor
+// over q, the height field is not); air: a piece whose floor q is above (-1: none, q is solid); lowest: the piece
 // with the lowest floor.
 bool gCover(Cell c, uint blk, vec3 q, out int air, out int lowest) {
   int b = gBin(c, blk, q.xy);
@@ -182,13 +209,13 @@ bool gCover(Cell c, uint blk, vec3 q, out int air, out int lowest) {
   for (uint k = 0u; k < n; ++k) {
     uint i = grooveWord[list + k];
     // The capsule test from the piece's first six words; the rest only for a covering piece.
-    uint w = pieces + i * 12u;
+    uint w = pieces + i * 14u;
     vec2 a = vec2(gWordF(w), gWordF(w + 1u)), e = vec2(gWordF(w + 2u), gWordF(w + 3u));
-    float hw = gWordF(w + 5u);
+    float hw = gWordF(w + 13u);  // the capsule reaches the lips
     vec2 r = q.xy - a;
     if (dot(r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u)), r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u))) >= hw * hw) continue;
     GPiece p = gPiece(blk, i);
-    float f = gFloor(p, q.xy);
+    float f = gFloor(c, p, q.xy);
     if (q.z > f) air = int(i);
     if (f < low) {
       low = f;
@@ -238,18 +265,32 @@ bool gNear(Cell c, uint blk, vec2 q, float radius) {
   uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
   uint list = blk + grooveWord[blk + 2u] + start, pieces = blk + grooveWord[blk + 3u];
   for (uint k = 0u; k < n; ++k) {
-    uint w = pieces + grooveWord[list + k] * 12u;
+    uint w = pieces + grooveWord[list + k] * 14u;
     vec2 a = vec2(gWordF(w), gWordF(w + 1u)), e = vec2(gWordF(w + 2u), gWordF(w + 3u)), r = q - a;
-    if (length(r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u))) < gWordF(w + 5u) + radius) return true;
+    if (length(r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u))) < gWordF(w + 13u) + radius) return true;
   }
   return false;
 }
 
+// The first t in [t0, t1] where the ray is on or under piece p's floor inside its capsule, -1 when
+// none: at the capsule's entry if it enters under the floor, else where it meets the floor.
+float gFloorCrossing(Cell c, GPiece p, vec3 o, vec3 d, float t0, float t1) {
+  vec2 span = gCapsuleSpan(p, o.xy, d.xy);
+  float a = max(t0, span.x), b = min(t1, span.y);
+  if (!(a < b)) return -1.0;
+  vec3 qa = o + d * a;
+  if (qa.z <= gFloor(c, p, qa.xy)) return a;
+  float te = gAirExit(c, p, o, d, a, b);
+  vec3 qe = o + d * te;
+  float s, x;
+  return te < b && gDist(p, qe.xy, s, x) < p.lip && qe.z <= gFloor(c, p, qe.xy) ? te : -1.0;
+}
+
 // Inside a groove's capsule the carved surface is the lowest floor there; elsewhere the height
 // field. The height field's march finds tH; where it passed over a capsule whose floor lies above
-// the height field (the data's blurred crack is wider than its profile), the floor was crossed
-// first: the stretch of ray that can reach the floors before tH is sampled for a solid point
-// inside a capsule. From tH, a point in a groove's air advances to that piece's floor or out of
+// the height field (the data's blurred crack, wider than its profile, lies under the rim), the
+// floor was crossed first: over the stretch of ray that can reach such floors before tH, each
+// piece near it gives its first floor crossing inside its capsule. From tH, a point in a groove's air advances to that piece's floor or out of
 // its capsule, until it is solid; out of every capsule and above the height field, the march
 // goes on from there.
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
@@ -284,36 +325,43 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     if (it > 0) hh = gMarchOn(c, o, d, t, tExit, th);  // on from where the ray left the capsules
     float tH = hh ? th : tExit;
     // A floor above the height field before tH.
-    float ta = max(t, tH - window), tPrev = t;
+    float ta = max(t, tH - window);
     // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces
-    // near them).
-    float reach = length(d.xy) * (tH - ta);
-    bool near = rise > 0.0 && (gNear(c, blk, (o + d * tH).xy, reach) || gNear(c, blk, (o + d * ta).xy, reach));
-    for (int k = 0; k <= 8 && !found && near; ++k) {
-      float tk = mix(ta, tH, float(k) / 8.0);
-      work += 1u;
-      if (!gCover(c, blk, o + d * tk, air, lowest) || air >= 0) {
-        tPrev = tk;
-        continue;
+    // near them): each such piece's first floor crossing inside its capsule over the stretch.
+    float reach = length(d.xy) * (tH - ta), best = 1e30;
+    for (int e = 0; e < (rise > 0.0 ? 2 : 0); ++e) {
+      vec2 qe = (o + d * (e == 0 ? tH : ta)).xy;
+      int b = gBin(c, blk, qe);
+      uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
+      uint list = blk + grooveWord[blk + 2u] + start;
+      for (uint k = 0u; k < n; ++k) {
+        GPiece p = gPiece(blk, grooveWord[list + k]);
+        float ps, px;
+        if (gDist(p, qe, ps, px) >= p.lip + reach) continue;
+        work += 1u;
+        float tc = gFloorCrossing(c, p, o, d, ta, min(tH, best));
+        if (tc >= 0.0) best = min(best, tc);
       }
-      for (int j = 0; j < 14; ++j) {
-        float tm = 0.5 * (tPrev + tk);
-        if (gCover(c, blk, o + d * tm, air, lowest) && air < 0) tk = tm; else tPrev = tm;
-      }
-      gCover(c, blk, o + d * tk, air, lowest);
-      t = tk;
-      piece = lowest;
-      found = true;
     }
-    if (found || !hh) break;
-    t = tH;
+    if (best < tH) {
+      // On a floor: solid unless in another groove's air (the advance below goes on from there).
+      t = best;
+      if (gCover(c, blk, o + d * t, air, lowest) && air < 0) {
+        piece = lowest;
+        found = true;
+        break;
+      }
+    }
+    if (found || (!hh && best >= tH)) break;
+    bool fromFloor = best < tH;
+    if (!fromFloor) t = tH;
     bool onward = false;
     for (int j = 0; j < 16; ++j) {
       vec3 q = o + d * t;
       work += 1u;
       if (!gCover(c, blk, q, air, lowest)) {
         // Out of every capsule: the height field's surface (its hit, or a capsule's edge under it).
-        if (j == 0 || (sampleHeight(c, q.xy) != kUncovered && q.z <= sampleHeight(c, q.xy) + eps)) found = true;
+        if ((j == 0 && !fromFloor) || (sampleHeight(c, q.xy) != kUncovered && q.z <= sampleHeight(c, q.xy) + eps)) found = true;
         else onward = true;
         break;
       }
@@ -322,7 +370,7 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
         found = true;
         break;
       }
-      t = gAirExit(gPiece(blk, uint(air)), o, d, t, tExit);
+      t = gAirExit(c, gPiece(blk, uint(air)), o, d, t, tExit);
       if (t >= tExit) return false;
     }
     if (!found && !onward) found = true;  // the iteration cap: take where it stopped
@@ -390,8 +438,7 @@ vec3 gFootprintSample(Cell c, GPiece p, vec3 C, float ra, float rx, vec3 o, vec3
         f0 = f1;
       }
     }
-    float sl;
-    gDepth(p.prof, abs(xh), p.hw, sl);
+    float sl = gSmoothSlope(p.prof, abs(xh), p.hw);
     dDdx = xh < 0.0 ? -sl : sl;
   }
   vec2 g = p.e * ra + n * (rx - dDdx);
@@ -429,9 +476,9 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
         GPiece p = gPiece(blk, i);
         float s, x;
         float gap = gDist(p, hit.xy, s, x) - p.hw;
-        float ra, rx;
-        gRim(p, s, x, ra, rx);
-        vec3 a3 = vec3(-p.e.y, p.e.x, rx);
+        vec2 gr;
+        gRim(p, s, x, gr);
+        vec3 a3 = vec3(-p.e.y, p.e.x, dot(gr, vec2(-p.e.y, p.e.x)));
         float wpx = 2.0 * p.hw * length(a3 - d * dot(a3, d)) / foot;
         if (wpx < 2.0 && gap < reach && gap < bestGap) {
           best = int(i);
@@ -441,10 +488,12 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
     }
   if (best < 0) return color;
   GPiece p = gPiece(blk, uint(best));
-  float s0, x0, ra, rx;
+  float s0, x0;
+  vec2 gr;
   gDist(p, hit.xy, s0, x0);
   s0 = clamp(s0, 0.0, p.len);
-  gRim(p, s0, 0.0, ra, rx);
+  float z0 = gRim(p, s0, 0.0, gr);
+  float ra = dot(gr, p.e), rx = dot(gr, vec2(-p.e.y, p.e.x));
   vec3 R = toFrame(c, camRight), U = toFrame(c, camUp);
   vec3 e3 = vec3(p.e, ra);
   vec2 g2 = vec2(dot(e3, R), dot(e3, U));
@@ -456,8 +505,7 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   vec3 rel = cellRelativeToCamera(c);
   vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
-  float za, zx;
-  vec3 C = vec3(p.a + p.e * s0, gRim(p, s0, 0.0, za, zx));
+  vec3 C = vec3(p.a + p.e * s0, z0);
   vec3 sum = vec3(0.0);
   float wsum = 0.0;
   int n = clamp(grooveSamples, 1, 64);
