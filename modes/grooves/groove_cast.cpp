@@ -51,9 +51,11 @@ Eigen::Vector2d surfaceGradient(const PackReader& pack, const CellRecord& c, con
 // detection and measurement put it; shared with the neighbouring pieces) and the surface's
 // gradient there.
 void measureRim(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
-  // Past the reach of the pack's reconstruction (splat and smoothing blur a crack over about two
-  // sample spacings), so the gradient is the surface's, not the blurred crack's.
-  p.lip = p.halfWidth + texelOf(c) + 2 * pack.meta().sampleSpacing;
+  // Past the reach of the pack's reconstruction from points (splat and smoothing blur a crack over
+  // about two sample spacings), so the gradient is the surface's, not the blurred crack's;
+  // triangles are rasterized exactly, a texel suffices.
+  const bool points = (pack.meta().flags & kPackFromTriangles) == 0;
+  p.lip = p.halfWidth + texelOf(c) + (points ? 2 * pack.meta().sampleSpacing : 0.0);
   p.rimW[0] = wA;
   p.rimW[1] = wB;
   p.rimG[0] = surfaceGradient(pack, c, p.a, p.lip);

@@ -5,7 +5,7 @@
 // grid over the cell's tile, and the cast that carves them into the height field.
 //
 // The carved surface: inside a piece's capsule (r < its lip, r the distance to its segment, the
-// lip half a width plus a texel and two sample spacings: ends are rounded, joints and crossings
+// lip half a width plus a texel, and two sample spacings for points: ends are rounded, joints and crossings
 // are the union of the grooves) the lowest floor there, floor_i = rim_i - D_i(r), the rim from
 // the height field at the groove's lips and D the profile (0 past the half width); elsewhere the
 // cell's height field h. At the capsule's edge the rim (the tangent plane at the line) meets h to
@@ -42,12 +42,12 @@ struct Piece {
   double length = 0, halfWidth = 0;
   // The rim: at the start and the end, the line's own height (the line lies at the rim level;
   // shared by neighbouring pieces) and the surface's gradient (d w / d(u, v)) there, from the
-  // height field half a width plus a texel and two sample spacings around the point (past the
+  // height field half a width plus a texel (and for points two sample spacings) around it (past the
   // reach of the reconstruction's blur of the crack); in between linear. rim(q) = w(c) + g(c).(q - c),
   // c the segment's point closest to q: the surface's tangent plane at the line.
   double rimW[2] = {0, 0};
   Eigen::Vector2d rimG[2] = {Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
-  double lip = 0;  // the capsule's radius: half a width, a texel and two sample spacings
+  double lip = 0;  // the capsule's radius: half a width, a texel (and two sample spacings for points)
   uint32_t groove = 0;  // its profile
 };
 

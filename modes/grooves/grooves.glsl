@@ -37,7 +37,7 @@ struct GPiece {
   vec2 a, e;      // start, unit direction (frame u, v)
   float len, hw;  // length, half width
   vec3 rim0, rim1; // the rim at s = 0 and s = len: the line's height, the surface's gradient
-  float lip;      // the capsule's radius (half a width, a texel and two sample spacings)
+  float lip;      // the capsule's radius (half a width, a texel; for points two sample spacings more)
   uint prof;      // first word of its profile (9 depths)
 };
 
