@@ -1,9 +1,9 @@
 #include "viewer/source_points.h"
 
 #include <cmath>
-#include <filesystem>
 
 #include "formats/source.h"
+#include "modes/pack_sources.h"
 #include "viewer/renderer.h"
 
 namespace sa {
@@ -35,13 +35,7 @@ class ToFloats : public BatchSink {
 }  // namespace
 
 Status loadSourcePoints(const PackReader& pack, SourcePoints& out) {
-  std::string columns;
-  const auto sources = packSources(pack, columns);
-  if (sources.empty()) return Status::badInput(pack.path() + ": the pack names no source files (NOTE section)");
-  for (const auto& s : sources)
-    if (!std::filesystem::exists(s))
-      return Status::badInput(pack.path() + ": source file " + s + " is gone; the points baseline reads the sources");
-  auto input = InputSet::open(sources, columns);
+  auto input = openPackSources(pack, "the points baseline reads the sources");
   if (!input) return input.status();
   out.xyz.clear();
   out.rgba.clear();

@@ -8,12 +8,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
 #include <mutex>
 #include <sstream>
 #include <unordered_map>
 
 #include "formats/source.h"
+#include "modes/pack_sources.h"
 
 namespace sa::gdm {
 namespace {
@@ -436,16 +436,10 @@ Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, const std
     if (cells[i].flags & kCellForced) forced.push_back(i);
   std::vector<CellGrid> grids(forced.size());
   if (forced.empty()) return grids;
-  std::string columns;
-  const auto sources = packSources(pack, columns);
-  if (sources.empty()) return Status::badInput(pack.path() + ": the pack names no source files (NOTE); gdm builds from them");
-  for (const auto& s : sources)
-    if (!std::filesystem::exists(s))
-      return Status::badInput(pack.path() + ": source file " + s + " is gone; gdm builds its voxels from the sources");
-  auto input = InputSet::open(sources, columns);
+  auto input = openPackSources(pack, "gdm builds its voxels from the sources");
   if (!input) return input.status();
   Collect all(pack.meta().origin);
-  const bool meshes = sources.size() == 1 && input->hasTriangles();
+  const bool meshes = input->hasTriangles();
   SA_RETURN_IF_ERROR(input->stream(all, meshes));
   const double spacing = pack.meta().sampleSpacing;
   std::atomic<uint64_t> done{0};

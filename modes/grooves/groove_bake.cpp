@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <filesystem>
 
 #include "formats/source.h"
 #include "modes/grooves/groove_cast.h"
+#include "modes/pack_sources.h"
 
 namespace sa::grooves {
 namespace {
@@ -21,13 +21,7 @@ struct PointSink : BatchSink {
 
 // The pack's source points (world coordinates); mesh: whether the source is one mesh.
 Status sourcePoints(const PackReader& pack, std::vector<double>& pos, bool& mesh) {
-  std::string columns;
-  const auto sources = packSources(pack, columns);
-  if (sources.empty()) return Status::badInput(pack.path() + ": the pack names no source files (NOTE); grooves are found in them");
-  for (const auto& s : sources)
-    if (!std::filesystem::exists(s))
-      return Status::badInput(pack.path() + ": source file " + s + " is gone; grooves are found in the raw points");
-  auto input = InputSet::open(sources, columns);
+  auto input = openPackSources(pack, "grooves are found in the raw points");
   if (!input) return input.status();
   PointSink sink;
   SA_RETURN_IF_ERROR(input->stream(sink, false));

@@ -403,15 +403,18 @@ std::string bytesOf(const std::string& path) {
 // too) refuses with exit 2 and changes nothing; image outputs are PNG or JPEG by extension.
 // `scanatlas grooves` on a generated scan with known grooves: JSON and CSV written, the grooves
 // there, and clear errors for bad options.
+// A synthetic groove scan's points as a binary PLY.
+void writeScanPly(const std::string& path, const SyntheticScan& scan) {
+  std::ofstream o(path, std::ios::binary);
+  o << "ply\nformat binary_little_endian 1.0\nelement vertex " << scan.pos.size() / 3
+    << "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+  o.write(reinterpret_cast<const char*>(scan.pos.data()), std::streamsize(scan.pos.size() * sizeof(double)));
+}
+
 TEST(Cli, GroovesExportJsonAndCsv) {
   test::TempDir d;
   const SyntheticScan scan = makeGrooveScan(200, 1, 0.1, acceptanceGrooves(200, 1, 0.1), 3);
-  {
-    std::ofstream o(d.file("wall.ply"), std::ios::binary);
-    o << "ply\nformat binary_little_endian 1.0\nelement vertex " << scan.pos.size() / 3
-      << "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
-    o.write(reinterpret_cast<const char*>(scan.pos.data()), std::streamsize(scan.pos.size() * sizeof(double)));
-  }
+  writeScanPly(d.file("wall.ply"), scan);
   const std::string in = d.file("wall.ply");
   CmdResult r = run("grooves " + in + " --json " + d.file("g.json") + " --csv " + d.file("g.csv") + " --quiet");
   ASSERT_EQ(r.code, 0) << r.out;
@@ -469,12 +472,7 @@ TEST(Cli, GroovesExportJsonAndCsv) {
 TEST(Cli, GroovesModePackBakeRender) {
   test::TempDir d;
   const SyntheticScan scan = makeGrooveScan(160, 1, 0.1, acceptanceGrooves(160, 1, 0.1), 5);
-  {
-    std::ofstream o(d.file("wall.ply"), std::ios::binary);
-    o << "ply\nformat binary_little_endian 1.0\nelement vertex " << scan.pos.size() / 3
-      << "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
-    o.write(reinterpret_cast<const char*>(scan.pos.data()), std::streamsize(scan.pos.size() * sizeof(double)));
-  }
+  writeScanPly(d.file("wall.ply"), scan);
   const std::string in = d.file("wall.ply"), pack = d.file("wall.hfa");
   const CmdResult p = runErr("pack " + in + " -o " + pack + " --modes grooves", d.file("err.txt"));
   ASSERT_EQ(p.code, 0) << p.err;

@@ -218,6 +218,11 @@ class GroovesGl : public test::GlTest {
     return pixels ? double(ok) / double(pixels) : 0;
   }
 
+  // The width that is `px` pixels on screen at the image centre.
+  static double widthFor(const Camera& cam, double px) {
+    return px * (cam.target - cam.eye).norm() * cam.fovDeg * M_PI / 180 / cam.height;
+  }
+
   // Width of the grooves on screen at the image centre, in pixels.
   static double widthPixels(const Camera& cam, double width) {
     const double dist = (cam.target - cam.eye).norm();
@@ -228,8 +233,7 @@ class GroovesGl : public test::GlTest {
 TEST_F(GroovesGl, DepthMatchesTheCarvedMeshAt20And2And03Pixels) {
   const Camera cam = view(256);
   for (double px : {20.0, 2.0, 0.3}) {
-    const double dist = (cam.target - cam.eye).norm();
-    const double width = px * dist * cam.fovDeg * M_PI / 180 / cam.height;
+    const double width = widthFor(cam, px);
     test::TempDir dir;
     PackReader p;
     ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
@@ -256,8 +260,7 @@ TEST_F(GroovesGl, DepthMatchesTheCarvedMeshAt20And2And03Pixels) {
 
 TEST_F(GroovesGl, NarrowGroovesAreAntiAliasedLikeSupersampling) {
   const Camera cam = view(192);
-  const double dist = (cam.target - cam.eye).norm();
-  const double width = 0.3 * dist * cam.fovDeg * M_PI / 180 / cam.height;
+  const double width = widthFor(cam, 0.3);
   test::TempDir dir;
   PackReader p;
   ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
@@ -308,8 +311,7 @@ TEST_F(GroovesGl, NarrowGroovesAreAntiAliasedLikeSupersampling) {
 
 TEST_F(GroovesGl, CpuCastAgreesWithTheShader) {
   const Camera cam = view(128);
-  const double dist = (cam.target - cam.eye).norm();
-  const double width = 12 * dist * cam.fovDeg * M_PI / 180 / cam.height;
+  const double width = widthFor(cam, 12);
   test::TempDir dir;
   PackReader p;
   ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
