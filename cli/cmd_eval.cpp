@@ -55,7 +55,7 @@ const char* kHelp =
     "  --path FILE | --orbit N   cameras (default --orbit 8); --zoom F as for bench\n"
     "  --size WxH             (default 1024x1024); --fov DEG, --up X,Y,Z as for render (up\n"
     "                         defaults to the pack's up axis)\n"
-    "  --mode LIST            parallax, exact, vdm, gdm (each needs 'scanatlas bake PACK --mode M',\n"
+    "  --mode LIST            parallax, exact, vdm, gdm, grooves (each needs 'scanatlas bake PACK --mode M',\n"
     "                         else its fallback is drawn and said), slices, auto, points (default\n"
     "                         parallax); one row per mode (per --iterations for parallax)\n"
     "  --iterations LIST      parallax step bounds (default 64)\n"
