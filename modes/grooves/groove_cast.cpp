@@ -23,11 +23,16 @@ double texelOf(const CellRecord& c) {
 
 Eigen::Vector2d across(const Piece& p) { return {-p.e.y(), p.e.x()}; }
 
+// ceil(x) clamped to 1..4096, in double first (a huge or NaN x must not overflow the conversion).
+int countOf(double x) { return x >= 1 ? (x < 4096 ? int(std::ceil(x)) : 4096) : 1; }
+
 int gridOf(const CellRecord& c) { return std::clamp(int(std::ceil(std::max(c.tileW, c.tileH) / 4.0)), 1, kMaxGrid); }
 
 // The bin of (u, v) in a cell's grid (clamped to the grid).
 int binCoord(double x, double lo, double hi, int g) {
-  return std::clamp(int(std::floor((x - lo) / (hi - lo) * g)), 0, g - 1);
+  // Clamped in double first: a far point (or NaN) must not overflow the conversion.
+  const double f = std::floor((x - lo) / (hi - lo) * g);
+  return f >= 0 ? (f < g ? int(f) : g - 1) : 0;
 }
 
 // The surface's gradient (d w / d(u, v)) at q from the height field `reach` around it (central
@@ -87,8 +92,7 @@ double lowestFloor(const Piece& p, const float* profile) {
 double riseOver(const PackReader& pack, const CellRecord& c, const Model& m, const Piece& p) {
   const HeightField h{&pack, &c};
   const double step = 0.5 * texelOf(c);
-  const int ns = std::clamp(int(std::ceil((p.length + 2 * p.lip) / step)), 1, 4096);
-  const int nx = std::clamp(int(std::ceil(2 * p.lip / step)), 1, 4096);
+  const int ns = countOf((p.length + 2 * p.lip) / step), nx = countOf(2 * p.lip / step);
   double rise = 0;
   for (int i = 0; i <= ns; ++i)
     for (int j = 0; j <= nx; ++j) {
@@ -194,7 +198,7 @@ Model buildModel(const PackReader& pack, const GrooveSet& set) {
           continue;
         if (!onSurface(pack, c, A, B, depth)) continue;
         // Pieces of at most kMaxPieceTexels, so the lips follow the surface.
-        const int parts = std::clamp(int(std::ceil((B - A).head<2>().norm() / (kMaxPieceTexels * texelOf(c)))), 1, 4096);
+        const int parts = countOf((B - A).head<2>().norm() / (kMaxPieceTexels * texelOf(c)));
         for (int k2 = 0; k2 < parts; ++k2) {
           const Eigen::Vector3d P = A + (B - A) * (double(k2) / parts), Q = A + (B - A) * (double(k2 + 1) / parts);
           Piece p;

@@ -1,0 +1,140 @@
+// The GROO section (modes/grooves/groove_cast.h): a model built from given grooves on a packed
+// plane round-trips through the pack, and a corrupted section (sizes, block offsets, bin lists,
+// piece and profile references) is refused with a message naming the pack, never trusted.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "../common/render_util.h"
+#include "modes/grooves/groove_cast.h"
+
+namespace sa {
+namespace {
+
+struct Fixture {
+  test::TempDir dir;
+  PackReader pack;
+  gcast::Model model;
+  ExtraSection section;
+};
+
+// A flat 1 x 1 plane of points (z = 0, spacing 0.01) and two crossing V grooves 0.05 wide.
+void makePlane(Fixture& f) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  for (int j = 0; j <= 100; ++j)
+    for (int i = 0; i <= 100; ++i) {
+      pts.emplace_back(0.01 * i, 0.01 * j, 0);
+      nrm.emplace_back(0, 0, 1);
+    }
+  ASSERT_TRUE(f.pack.open(test::packPoints(f.dir, pts, nrm, "plane")).isOk());
+  GrooveSet set;
+  for (int k = 0; k < 2; ++k) {
+    Groove g;
+    g.line = {k ? Eigen::Vector3d(0.2, 0.5, 0) : Eigen::Vector3d(0.5, 0.2, 0), k ? Eigen::Vector3d(0.8, 0.5, 0) : Eigen::Vector3d(0.5, 0.8, 0)};
+    g.width = 0.05;
+    g.depth = 0.02;
+    g.shape = "V";
+    set.grooves.push_back(g);
+  }
+  Groove gap;
+  gap.line = {Eigen::Vector3d(0.1, 0.1, 0), Eigen::Vector3d(0.2, 0.1, 0)};
+  gap.width = 0.03;
+  gap.shape = "gap";
+  set.grooves.push_back(gap);
+  f.model = gcast::buildModel(f.pack, set);
+  f.section = gcast::makeSection(f.pack, f.model, groovesJsonText(set), 0.5);
+}
+
+// Writes the pack with `bytes` as its GROO section and reads the section back.
+Result<gcast::SectionView> readWith(Fixture& f, const std::vector<uint8_t>& bytes, PackReader& out) {
+  ExtraSection s = f.section;
+  s.bytes = bytes;
+  const std::string path = f.dir.file("with.hfa");
+  Status st = rewritePackWithSections(f.pack, path, {s});
+  if (!st) return st;
+  st = out.open(path);
+  if (!st) return st;
+  return gcast::readSection(out);
+}
+
+TEST(GrooveSection, RoundTripsThroughThePack) {
+  Fixture f;
+  makePlane(f);
+  ASSERT_EQ(f.model.grooves, 2u);  // the gap (depth unknown) is not stored
+  EXPECT_EQ(f.model.drawn, 2u);
+  EXPECT_EQ(f.model.skipped, 1u);
+  ASSERT_FALSE(f.model.cells.empty());
+  PackReader p;
+  auto v = readWith(f, f.section.bytes, p);
+  ASSERT_TRUE(v.isOk()) << v.status().message();
+  ASSERT_TRUE(v->present);
+  const gcast::Model m = gcast::modelFromSection(p, *v);
+  ASSERT_EQ(m.cells.size(), f.model.cells.size());
+  for (size_t i = 0; i < m.cells.size(); ++i) {
+    ASSERT_EQ(m.cells[i].pieces.size(), f.model.cells[i].pieces.size());
+    EXPECT_EQ(m.cells[i].bins, f.model.cells[i].bins);
+    for (size_t k = 0; k < m.cells[i].pieces.size(); ++k) {
+      const gcast::Piece &a = m.cells[i].pieces[k], &b = f.model.cells[i].pieces[k];
+      EXPECT_NEAR(a.halfWidth, b.halfWidth, 1e-6);
+      EXPECT_NEAR(a.rimW[0], b.rimW[0], 1e-5);
+      EXPECT_EQ(a.groove, b.groove);
+    }
+  }
+  EXPECT_NE(v->json.find("\"polyline\""), std::string::npos);
+  // Every cell's floor reaches the grooves' depth below the plane.
+  for (const auto& c : m.cells) EXPECT_LE(c.floor, -0.019);
+}
+
+TEST(GrooveSection, CorruptionIsRefused) {
+  Fixture f;
+  makePlane(f);
+  const std::vector<uint8_t>& good = f.section.bytes;
+  gcast::SectionHeader h;
+  std::memcpy(&h, good.data(), sizeof(h));
+  const size_t entries = sizeof(h), words = entries + size_t(h.cellCount) * 4;
+  uint32_t blk = gcast::kNoEntry;
+  for (uint32_t i = 0; i < h.cellCount && blk == gcast::kNoEntry; ++i) std::memcpy(&blk, &good[entries + 4 * i], 4);
+  ASSERT_NE(blk, gcast::kNoEntry);
+  auto word = [&](std::vector<uint8_t>& b, size_t w, uint32_t v) { std::memcpy(&b[words + 4 * w], &v, 4); };
+  uint32_t listOff, pieceOff;
+  std::memcpy(&listOff, &good[words + 4 * (blk + 2)], 4);
+  std::memcpy(&pieceOff, &good[words + 4 * (blk + 3)], 4);
+  struct Case {
+    const char* what;
+    std::vector<uint8_t> bytes;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"truncated", std::vector<uint8_t>(good.begin(), good.begin() + 40)});
+  cases.push_back({"short by a word", std::vector<uint8_t>(good.begin(), good.end() - 4)});
+  std::vector<uint8_t> b = good;
+  b[0] = 9;
+  cases.push_back({"version", b});
+  b = good;
+  std::memcpy(&b[entries], "\xff\xff\xff\x7f", 4);  // the first cell's block
+  cases.push_back({"block past the words", b});
+  b = good;
+  word(b, blk, 0);  // a zero grid
+  cases.push_back({"zero grid", b});
+  b = good;
+  word(b, blk + gcast::kBlockHeaderWords, 0xfffffff0u);  // the first bin's list start
+  cases.push_back({"bin list past the block", b});
+  b = good;
+  word(b, blk + listOff, 0xffffu);  // the first list entry: a piece it lacks
+  cases.push_back({"bin names a missing piece", b});
+  b = good;
+  word(b, blk + pieceOff + 12, 0xfffffff0u);  // the first piece's profile
+  cases.push_back({"piece names a missing profile", b});
+  for (const Case& c : cases) {
+    PackReader p;
+    auto v = readWith(f, c.bytes, p);
+    if (v.isOk() && v->present) {
+      ADD_FAILURE() << c.what << ": accepted";
+      continue;
+    }
+    ASSERT_FALSE(v.isOk()) << c.what;
+    EXPECT_NE(v.status().message().find("GROO"), std::string::npos) << c.what << ": " << v.status().message();
+  }
+}
+
+}  // namespace
+}  // namespace sa
