@@ -140,27 +140,18 @@ ModeSection modeSection(const PackReader& pack, RenderMode m) {
       s.bytes = v->bytes;
       s.bakeSeconds = v->bakeSeconds;
     }
-  } else if (m == RenderMode::kGdm) {
-    auto v = gdm::readSection(pack);
-    if (v.isOk() && v->present) {
-      s.present = true;
-      s.bytes = v->bytes;
-      s.bakeSeconds = v->header.bakeSeconds;
-    }
-  } else if (m == RenderMode::kGrooves) {
-    auto v = gcast::readSection(pack);
-    if (v.isOk() && v->present) {
-      s.present = true;
-      s.bytes = v->bytes;
-      s.bakeSeconds = v->header.bakeSeconds;
-    }
-  } else if (m == RenderMode::kVdm) {
-    auto v = vdm::readSection(pack);
-    if (v.isOk() && v->present) {
-      s.present = true;
-      s.bytes = v->bytes;
-      s.bakeSeconds = v->header.bakeSeconds;
-    }
+  } else {
+    // The sections with a header record: present, bytes, bake seconds alike.
+    auto fill = [&](auto v) {
+      if (v.isOk() && v->present) {
+        s.present = true;
+        s.bytes = v->bytes;
+        s.bakeSeconds = v->header.bakeSeconds;
+      }
+    };
+    if (m == RenderMode::kGdm) fill(gdm::readSection(pack));
+    else if (m == RenderMode::kGrooves) fill(gcast::readSection(pack));
+    else if (m == RenderMode::kVdm) fill(vdm::readSection(pack));
   }
   return s;
 }
