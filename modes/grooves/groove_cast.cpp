@@ -35,36 +35,45 @@ int binCoord(double x, double lo, double hi, int g) {
   return f >= 0 ? (f < g ? int(f) : g - 1) : 0;
 }
 
-// The surface's gradient (d w / d(u, v)) at q from the height field `reach` around it (central
-// differences; one-sided where a side is uncovered, 0 along an axis with neither).
-Eigen::Vector2d surfaceGradient(const PackReader& pack, const CellRecord& c, const Eigen::Vector2d& q, double reach) {
-  Eigen::Vector2d g = Eigen::Vector2d::Zero();
-  const double h0 = exact::surfaceHeight(pack, c, q.x(), q.y());
-  for (int a = 0; a < 2; ++a) {
-    Eigen::Vector2d off = Eigen::Vector2d::Zero();
-    off[a] = reach;
-    const Eigen::Vector2d qp = q + off, qm = q - off;
-    const double hp = exact::surfaceHeight(pack, c, qp.x(), qp.y()), hm = exact::surfaceHeight(pack, c, qm.x(), qm.y());
-    if (!std::isnan(hp) && !std::isnan(hm)) g[a] = (hp - hm) / (2 * reach);
-    else if (!std::isnan(hp) && !std::isnan(h0)) g[a] = (hp - h0) / reach;
-    else if (!std::isnan(hm) && !std::isnan(h0)) g[a] = (h0 - hm) / reach;
-  }
-  return g;
-}
-
-// Piece p's rim: the line's own heights at its ends (wA, wB: the line lies at the rim, as
-// detection and measurement put it; shared with the neighbouring pieces) and the surface's
-// gradient there.
-void measureRim(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB) {
-  // Past the reach of the pack's reconstruction from points (splat and smoothing blur a crack over
-  // about two sample spacings), so the gradient is the surface's, not the blurred crack's;
-  // triangles are rasterized exactly, a texel suffices.
+// Piece p's rim: at each end a parabola across the line, least squares over the height field on
+// both sides, from the lips (half a width plus a texel from the line; for packs made from points
+// two sample spacings more, past the reach of the reconstruction's blur of the crack) 4 texels
+// outward, at 3 places along (5 x 3 samples a side: scan noise averages out). With one side
+// uncovered, a straight line from the other; with neither, level at the line's own height (wA,
+// wB: the line lies at the rim level). nEnd: the direction across at each end (at a bend of the
+// polyline the bisector, so the pieces on either side fit the same parabola and meet there).
+void measureRim(const PackReader& pack, const CellRecord& c, Piece& p, double wA, double wB, const Eigen::Vector2d nEnd[2]) {
   const bool points = (pack.meta().flags & kPackFromTriangles) == 0;
-  p.lip = p.halfWidth + texelOf(c) + (points ? 2 * pack.meta().sampleSpacing : 0.0);
-  p.rimW[0] = wA;
-  p.rimW[1] = wB;
-  p.rimG[0] = surfaceGradient(pack, c, p.a, p.lip);
-  p.rimG[1] = surfaceGradient(pack, c, p.a + p.e * p.length, p.lip);
+  const double texel = texelOf(c);
+  p.lip = p.halfWidth + texel + (points ? 2 * pack.meta().sampleSpacing : 0.0);
+  for (int end = 0; end < 2; ++end) {
+    const Eigen::Vector2d q = p.a + p.e * (end ? p.length : 0.0), n = nEnd[end];
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    int count[2] = {0, 0};
+    for (int side = 0; side < 2; ++side)
+      for (int along = -1; along <= 1; ++along)
+        for (int k = 0; k <= 4; ++k) {
+          const double x = (side ? 1 : -1) * (p.lip + k * texel);
+          const Eigen::Vector2d l = q + p.e * (along * texel) + n * x;
+          const double h = exact::surfaceHeight(pack, c, l.x(), l.y());
+          if (std::isnan(h)) continue;
+          const double xs = x / p.lip;  // scaled: the normal equations stay well conditioned
+          const Eigen::Vector3d v(1, xs, xs * xs);
+          A += v * v.transpose();
+          b += v * h;
+          ++count[side];
+        }
+    double* r = p.rimQ[end];
+    const int fitted = (count[0] >= 5 && count[1] >= 5) ? 3 : (count[0] + count[1] >= 5 ? 2 : 0);
+    Eigen::Vector3d co = Eigen::Vector3d::Zero();
+    if (fitted == 3) co = A.ldlt().solve(b);
+    else if (fitted == 2) co.head<2>() = A.topLeftCorner<2, 2>().ldlt().solve(b.head<2>());
+    if (fitted == 0 || !co.allFinite()) co = Eigen::Vector3d(end ? wB : wA, 0, 0);
+    r[0] = co[0];
+    r[1] = co[1] / p.lip;
+    r[2] = co[2] / (p.lip * p.lip);
+  }
 }
 
 // Whether the groove's segment A-B (frame) lies on cell c's surface: at one of a few points along
@@ -80,11 +89,16 @@ bool onSurface(const PackReader& pack, const CellRecord& c, const Eigen::Vector3
   return false;
 }
 
-// The lowest point of piece p's floor over its capsule: its lowest rim less the profile's deepest
-// sample.
+// The lowest point of piece p's floor over its capsule: the lower of its ends' parabolas' minima
+// over x in [-lip, lip] (along, the rim mixes the two), less the profile's deepest sample.
 double lowestFloor(const Piece& p, const float* profile) {
-  return std::min(p.rimW[0], p.rimW[1]) - std::max(p.rimG[0].norm(), p.rimG[1].norm()) * p.lip -
-         *std::max_element(profile, profile + kProfileSamples);
+  double low = std::numeric_limits<double>::infinity();
+  for (const double* q : p.rimQ) {
+    auto at = [&](double x) { return q[0] + q[1] * x + q[2] * x * x; };
+    low = std::min({low, at(-p.lip), at(p.lip)});
+    if (q[2] > 0 && std::abs(q[1] / (2 * q[2])) < p.lip) low = std::min(low, at(-q[1] / (2 * q[2])));
+  }
+  return low - *std::max_element(profile, profile + kProfileSamples);
 }
 
 // How far piece p's floor rises above the height field over its capsule (samples half a texel
@@ -197,6 +211,17 @@ Model buildModel(const PackReader& pack, const GrooveSet& set) {
             hi.z() < c.box[4] - pad || lo.z() > c.box[5] + pad)
           continue;
         if (!onSurface(pack, c, A, B, depth)) continue;
+        // Across at the segment's ends: the bisector with the neighbouring segment's at a bend.
+        auto acrossOf = [&](size_t i) {
+          const Eigen::Vector2d d = (toFrame(c, g.line[i + 1] - origin) - toFrame(c, g.line[i] - origin)).head<2>();
+          return d.norm() > 1e-12 ? Eigen::Vector2d(-d.y() / d.norm(), d.x() / d.norm()) : Eigen::Vector2d(0, 0);
+        };
+        const Eigen::Vector2d nk = acrossOf(k);
+        auto bisector = [&](const Eigen::Vector2d& other) {
+          const Eigen::Vector2d b = nk + other;
+          return b.norm() > 0.5 ? Eigen::Vector2d(b.normalized()) : nk;
+        };
+        const Eigen::Vector2d nA = k > 0 ? bisector(acrossOf(k - 1)) : nk, nB = k + 2 < g.line.size() ? bisector(acrossOf(k + 1)) : nk;
         // Pieces of at most kMaxPieceTexels, so the lips follow the surface.
         const int parts = countOf((B - A).head<2>().norm() / (kMaxPieceTexels * texelOf(c)));
         for (int k2 = 0; k2 < parts; ++k2) {
@@ -208,7 +233,8 @@ Model buildModel(const PackReader& pack, const GrooveSet& set) {
           p.e = p.length > 1e-12 ? Eigen::Vector2d(ab / p.length) : Eigen::Vector2d::UnitX();
           p.halfWidth = hw;
           p.groove = gi;
-          measureRim(pack, c, p, P.z(), Q.z());
+          const Eigen::Vector2d ends[2] = {k2 == 0 ? nA : across(p), k2 + 1 == parts ? nB : across(p)};
+          measureRim(pack, c, p, P.z(), Q.z(), ends);
           per[ci].pieces.push_back(p);
         }
         placed = true;
@@ -260,8 +286,8 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
     }
     for (const auto& b : cp.bins) words.insert(words.end(), b.begin(), b.end());
     for (const Piece& p : cp.pieces) {
-      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.rimW[0], p.rimG[0].x(), p.rimG[0].y(),
-                       p.rimW[1], p.rimG[1].x(), p.rimG[1].y()})
+      for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.rimQ[0][0], p.rimQ[0][1], p.rimQ[0][2],
+                       p.rimQ[1][0], p.rimQ[1][1], p.rimQ[1][2]})
         put(float(v));
       words.push_back(p.groove * kProfileSamples);
       put(float(p.lip));
@@ -366,10 +392,8 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
       p.e = {f(w + 2), f(w + 3)};
       p.length = f(w + 4);
       p.halfWidth = f(w + 5);
-      p.rimW[0] = f(w + 6);
-      p.rimG[0] = {f(w + 7), f(w + 8)};
-      p.rimW[1] = f(w + 9);
-      p.rimG[1] = {f(w + 10), f(w + 11)};
+      for (int e = 0; e < 2; ++e)
+        for (int k = 0; k < 3; ++k) p.rimQ[e][k] = f(w + 6 + 3 * e + k);
       p.groove = v.words[w + 12] / kProfileSamples;
       p.lip = f(w + 13);
       cp.pieces.push_back(p);
@@ -404,15 +428,17 @@ double HeightField::operator()(double u, double v) const { return exact::surface
 double HeightField::texel() const { return texelOf(*cell); }
 
 double pieceRim(const Piece& p, double s, double x, Eigen::Vector2d* gradient) {
-  const double sc = std::clamp(s, 0.0, p.length), fs = p.length > 0 ? sc / p.length : 0.0;
-  const Eigen::Vector2d g = p.rimG[0] + (p.rimG[1] - p.rimG[0]) * fs;
-  const double w = p.rimW[0] + (p.rimW[1] - p.rimW[0]) * fs;
+  const double fs = p.length > 0 ? std::clamp(s / p.length, 0.0, 1.0) : 0.0;
+  const double xc = std::clamp(x, -p.lip, p.lip);
+  const double* q0 = p.rimQ[0];
+  const double* q1 = p.rimQ[1];
+  const double r0 = q0[0] + q0[1] * xc + q0[2] * xc * xc, r1 = q1[0] + q1[1] * xc + q1[2] * xc * xc;
   if (gradient) {
-    *gradient = g;
-    // Along the segment the line's own slope.
-    if (p.length > 0 && s > 0 && s < p.length) *gradient += p.e * ((p.rimW[1] - p.rimW[0]) / p.length - g.dot(p.e));
+    const double dx0 = q0[1] + 2 * q0[2] * xc, dx1 = q1[1] + 2 * q1[2] * xc;
+    *gradient = std::abs(x) < p.lip ? Eigen::Vector2d(across(p) * (dx0 + (dx1 - dx0) * fs)) : Eigen::Vector2d::Zero();
+    if (p.length > 0 && s > 0 && s < p.length) *gradient += p.e * ((r1 - r0) / p.length);
   }
-  return w + g.dot(p.e * (s - sc) + across(p) * x);
+  return r0 + (r1 - r0) * fs;
 }
 
 double smoothSlope(const float* profile, double r, double halfWidth) {

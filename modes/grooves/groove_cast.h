@@ -1,15 +1,19 @@
 // The `grooves` mode's core (MODES.md §4; seed 003 §3-5 and Bosch & Patow's real-time form),
 // GL-free: grooves (detected in the raw points or given, grooves/grooves.h) become per-cell
-// pieces - one straight piece of a centre line in the cell's frame, a rim plane fitted to the
-// height field at the groove's lips, and the groove's cross-section profile - binned in a uniform
-// grid over the cell's tile, and the cast that carves them into the height field.
+// pieces - one straight piece of a centre line in the cell's frame, a rim fitted across the
+// groove to the height field just outside its lips, and the groove's cross-section profile -
+// binned in a uniform grid over the cell's tile, and the cast that carves them into the height
+// field.
 //
 // The carved surface: inside a piece's capsule (r < its lip, r the distance to its segment, the
 // lip half a width plus a texel, and two sample spacings for points: ends are rounded, joints and crossings
-// are the union of the grooves) the lowest floor there, floor_i = rim_i - D_i(r), the rim from
-// the height field at the groove's lips and D the profile (0 past the half width); elsewhere the
-// cell's height field h. At the capsule's edge the rim (the tangent plane at the line) meets h to
-// first order. The data's own crack in h (blurred by the pack's
+// are the union of the grooves) the lowest floor there, floor_i = rim_i - D_i(r), the rim bridged
+// across the groove from the height field at its lips and D the profile (0 past the half width);
+// elsewhere the cell's height field h. Across the groove the rim is a parabola fitted to h on both
+// sides just outside the lips, so at the capsule's sides it meets h to within the fit's residual
+// with its slope and curvature: a curved surface stays whole (a tangent plane at the line would
+// stand off a convex lip or a fold by the curvature times the lip squared), and scan noise averages
+// out over the fit. The data's own crack in h (blurred by the pack's
 // reconstruction, wider and shallower than the profile) is replaced, not deepened. The cast
 // (castGrooved): h's first hit tH; a floor above h crossed before tH (each piece near the stretch
 // that can reach such floors: its first floor crossing); from tH, through the air of whatever piece the ray is in (to that
@@ -40,13 +44,11 @@ inline constexpr double kMaxPieceTexels = 8;
 struct Piece {
   Eigen::Vector2d a = Eigen::Vector2d::Zero(), e = Eigen::Vector2d::UnitX();  // start and unit direction (u, v)
   double length = 0, halfWidth = 0;
-  // The rim: at the start and the end, the line's own height (the line lies at the rim level;
-  // shared by neighbouring pieces) and the surface's gradient (d w / d(u, v)) there, from the
-  // height field half a width plus a texel (and for points two sample spacings) around it (past the
-  // reach of the reconstruction's blur of the crack); in between linear. rim(q) = w(c) + g(c).(q - c),
-  // c the segment's point closest to q: the surface's tangent plane at the line.
-  double rimW[2] = {0, 0};
-  Eigen::Vector2d rimG[2] = {Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
+  // The rim: at the start (end 0) and the end (end 1) a parabola across, rim = q[0] + q[1] x +
+  // q[2] x^2 (x across the line), fitted to the height field on both sides over a band just
+  // outside the lips (past the reach of the reconstruction's blur of the crack); along, the
+  // coefficients linear between the ends (s clamped to the segment).
+  double rimQ[2][3] = {{0, 0, 0}, {0, 0, 0}};
   double lip = 0;  // the capsule's radius: half a width, a texel (and two sample spacings for points)
   uint32_t groove = 0;  // its profile
 };
@@ -89,7 +91,7 @@ Model buildModel(const PackReader& pack, const GrooveSet& set);
 // The pack section `GROO` (docs/FORMAT.md): the model and the groove set's JSON (so `view` and
 // `info` list the grooves a pack draws).
 inline constexpr char kSectionId[4] = {'G', 'R', 'O', 'O'};
-inline constexpr uint32_t kSectionVersion = 1;
+inline constexpr uint32_t kSectionVersion = 2;  // 1 (tangent-plane rims) is refused: bake it again
 inline constexpr uint32_t kNoEntry = 0xffffffffu;
 struct SectionHeader {
   uint32_t version, cellCount, grooveCount, pieceCount;

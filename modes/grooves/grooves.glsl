@@ -3,7 +3,8 @@
 // Bosch & Patow's real-time form: per tile a grid of path-segment lists). Inside a groove's
 // capsule (r < half width, r the distance to one of its pieces' segments: rounded ends, joints
 // and crossings are the union of the grooves) the surface is the lowest floor there, floor_i =
-// rim_i - D_i(r), the rim taken from the height field at the groove's lips and D the profile;
+// rim_i - D_i(r), the rim a parabola across the groove fitted to the height field just outside
+// its lips and D the profile;
 // elsewhere the height field. The height field is marched (parallax_cast.glsl), floors above it
 // are caught before its hit, and from there the ray advances through the air of whatever piece
 // it is in (to the piece's floor, or out of its capsule) until it is solid: the hit's
@@ -36,7 +37,7 @@ const uint kNoGrooves = 0xffffffffu;
 struct GPiece {
   vec2 a, e;      // start, unit direction (frame u, v)
   float len, hw;  // length, half width
-  vec3 rim0, rim1; // the rim at s = 0 and s = len: the line's height, the surface's gradient
+  vec3 rim0, rim1; // the rim across at the start and the end: q0 + q1 x + q2 x^2 (x across the line)
   float lip;      // the capsule's radius (half a width, a texel; for points two sample spacings more)
   uint prof;      // first word of its profile (9 depths)
 };
@@ -75,15 +76,17 @@ float gDepth(uint prof, float r, float hw, out float slope) {
   return mix(d0, d1, f - float(k));
 }
 
-// The rim at the point (s, x) of the piece's frame (groove_cast.cpp pieceRim): the surface's
-// tangent plane at the segment's closest point c, w(c) + g(c).(q - c), both linear along the
-// piece; grad: its gradient (shading).
+// The rim at the point (s, x) of the piece's frame (groove_cast.cpp pieceRim): across, the
+// parabola fitted outside the lips (x clamped to them); along, its coefficients linear between
+// the ends (s clamped to the segment); grad: its gradient (shading).
 float gRim(GPiece p, float s, float x, out vec2 grad) {
-  float sc = clamp(s, 0.0, p.len), fs = p.len > 0.0 ? sc / p.len : 0.0;
-  vec3 r = mix(p.rim0, p.rim1, fs);
-  grad = r.yz;
-  if (p.len > 0.0 && s > 0.0 && s < p.len) grad += p.e * ((p.rim1.x - p.rim0.x) / p.len - dot(r.yz, p.e));
-  return r.x + dot(r.yz, p.e * (s - sc) + vec2(-p.e.y, p.e.x) * x);
+  float fs = p.len > 0.0 ? clamp(s / p.len, 0.0, 1.0) : 0.0;
+  float xc = clamp(x, -p.lip, p.lip);
+  vec3 b = vec3(1.0, xc, xc * xc);
+  vec3 k = mix(p.rim0, p.rim1, fs);
+  grad = abs(x) < p.lip ? vec2(-p.e.y, p.e.x) * (k.y + 2.0 * k.z * xc) : vec2(0.0);
+  if (p.len > 0.0 && s > 0.0 && s < p.len) grad += p.e * (dot(p.rim1, b) - dot(p.rim0, b)) / p.len;
+  return dot(k, b);
 }
 
 // The profile's slope for shading at r (groove_cast.cpp smoothSlope): linear between its facets'
@@ -257,19 +260,6 @@ bool gMarchOn(Cell c, vec3 o, vec3 d, float t0, float t1, out float tHit) {
 void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
   uint blk = grooveEntry[cell];
   if (blk != kNoGrooves) bmin.z = min(bmin.z, gWordF(blk + 4u));
-}
-
-// Whether a piece in q's bin comes within its half width plus `radius` of q.
-bool gNear(Cell c, uint blk, vec2 q, float radius) {
-  int b = gBin(c, blk, q);
-  uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
-  uint list = blk + grooveWord[blk + 2u] + start, pieces = blk + grooveWord[blk + 3u];
-  for (uint k = 0u; k < n; ++k) {
-    uint w = pieces + grooveWord[list + k] * 14u;
-    vec2 a = vec2(gWordF(w), gWordF(w + 1u)), e = vec2(gWordF(w + 2u), gWordF(w + 3u)), r = q - a;
-    if (length(r - e * clamp(dot(r, e), 0.0, gWordF(w + 4u))) < gWordF(w + 13u) + radius) return true;
-  }
-  return false;
 }
 
 // The first t in [t0, t1] where the ray is on or under piece p's floor inside its capsule, -1 when

@@ -1,8 +1,10 @@
 // The GROO section (modes/grooves/groove_cast.h): a model built from given grooves on a packed
 // plane round-trips through the pack, and a corrupted section (sizes, block offsets, bin lists,
-// piece and profile references) is refused with a message naming the pack, never trusted.
+// piece and profile references) is refused with a message naming the pack, never trusted. On a
+// curved surface the rim meets the height field at the capsule's sides.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 
 #include "../common/render_util.h"
@@ -76,7 +78,8 @@ TEST(GrooveSection, RoundTripsThroughThePack) {
     for (size_t k = 0; k < m.cells[i].pieces.size(); ++k) {
       const gcast::Piece &a = m.cells[i].pieces[k], &b = f.model.cells[i].pieces[k];
       EXPECT_NEAR(a.halfWidth, b.halfWidth, 1e-6);
-      EXPECT_NEAR(a.rimW[0], b.rimW[0], 1e-5);
+      EXPECT_NEAR(a.rimQ[0][0], b.rimQ[0][0], 1e-5);
+      EXPECT_NEAR(a.rimQ[1][1], b.rimQ[1][1], 1e-5);
       EXPECT_EQ(a.groove, b.groove);
     }
   }
@@ -134,6 +137,55 @@ TEST(GrooveSection, CorruptionIsRefused) {
     ASSERT_FALSE(v.isOk()) << c.what;
     EXPECT_NE(v.status().message().find("GROO"), std::string::npos) << c.what << ": " << v.status().message();
   }
+}
+
+// A groove along a cylinder of points (radius 0.3, the groove along its axis on top): where the
+// carved surface meets the height field at the capsule's sides (r just under the lip, past the
+// profile) the rim must be the surface, to a quarter of what the surface's tangent plane at the
+// line would be off (lip^2 / 2R; a rim that stood off by that drew a step along every groove on a
+// curved surface, as on Igea's lips).
+TEST(GrooveRim, MeetsACurvedSurfaceAtTheCapsulesSides) {
+  test::TempDir dir;
+  const double R = 0.3, sp = 0.005;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  for (int j = -60; j <= 60; ++j)
+    for (int i = 0; i <= 120; ++i) {
+      const double a = j * sp / R;
+      pts.emplace_back(i * sp, R * std::sin(a), R * std::cos(a));
+      nrm.emplace_back(0, std::sin(a), std::cos(a));
+    }
+  PackReader pack;
+  ASSERT_TRUE(pack.open(test::packPoints(dir, pts, nrm, "cylinder")).isOk());
+  GrooveSet set;
+  Groove g;
+  g.line = {Eigen::Vector3d(0.1, 0, R), Eigen::Vector3d(0.35, 0, R), Eigen::Vector3d(0.5, 0, R)};
+  g.width = 0.04;
+  g.depth = 0.015;
+  g.shape = "V";
+  set.grooves.push_back(g);
+  const gcast::Model m = gcast::buildModel(pack, set);
+  ASSERT_EQ(m.drawn, 1u);
+  const Eigen::Vector3d origin(pack.meta().origin);
+  double worst = 0, tangentOff = 0;
+  int checked = 0;
+  for (const gcast::CellPieces& cp : m.cells) {
+    const CellRecord& c = pack.cells()[cp.cell];
+    const gcast::HeightField h{&pack, &c};
+    for (const gcast::Piece& p : cp.pieces) {
+      tangentOff = p.lip * p.lip / (2 * R);
+      for (double side : {-0.99, 0.99}) {
+        const Eigen::Vector2d q = p.a + p.e * (0.5 * p.length) + Eigen::Vector2d(-p.e.y(), p.e.x()) * (side * p.lip);
+        const double hq = h(q.x(), q.y());
+        if (std::isnan(hq)) continue;
+        worst = std::max(worst, std::abs(gcast::pieceFloor(m, h, p, q) - hq));
+        ++checked;
+      }
+    }
+  }
+  std::printf("[groove-rim] %d capsule-side points: rim vs height field at most %.2e (a tangent plane at the line: %.2e)\n", checked,
+              worst, tangentOff);
+  ASSERT_GE(checked, 20);
+  EXPECT_LE(worst, 0.25 * tangentOff);
 }
 
 }  // namespace
