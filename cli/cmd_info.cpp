@@ -262,6 +262,8 @@ int cmdInfo(int argc, char** argv) {
   for (const ModeInfo& mi : allModes()) {
     const ModeSection ms = modeSection(pack, mi.mode);
     if (!ms.needed) std::printf("mode      %-9s ready (needs nothing baked)\n", mi.name);
+    else if (!ms.problem.empty())
+      std::printf("mode      %-9s unusable, draws %s: %s\n", mi.name, mi.fallback, ms.problem.c_str());
     else if (ms.present)
       std::printf("mode      %-9s section %.4s, %.2f MiB (%.2f bytes/texel), baked in %.2fs\n", mi.name, mi.sectionId,
                   double(ms.bytes) / 1048576.0, double(ms.bytes) / double(std::max<uint64_t>(1, tileTexels)), ms.bakeSeconds);

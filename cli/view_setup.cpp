@@ -113,6 +113,11 @@ Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, 
 void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m) {
   if (m == RenderMode::kPoints || r.modeReady(m)) return;
   const ModeInfo& mi = modeInfo(m);
+  if (!r.modeProblem(m).empty()) {
+    std::fprintf(stderr, "scanatlas: warning: %s; drawing %s instead of the %s mode\n", r.modeProblem(m).c_str(),
+                 modeName(r.drawnMode(m)), mi.name);
+    return;
+  }
   std::fprintf(stderr, "scanatlas: warning: %s has no %.4s section for the %s mode; drawing %s instead (bake it: "
                "scanatlas bake %s --mode %s)\n", pack.path().c_str(), mi.sectionId ? mi.sectionId : "----", mi.name,
                modeName(r.drawnMode(m)), pack.path().c_str(), mi.name);

@@ -135,6 +135,7 @@ ModeSection modeSection(const PackReader& pack, RenderMode m) {
   s.needed = true;
   if (m == RenderMode::kExact) {
     auto v = exact::readSection(pack);
+    if (!v.isOk()) s.problem = v.status().message();
     if (v.isOk() && v->present) {
       s.present = true;
       s.bytes = v->bytes;
@@ -143,6 +144,7 @@ ModeSection modeSection(const PackReader& pack, RenderMode m) {
   } else {
     // The sections with a header record: present, bytes, bake seconds alike.
     auto fill = [&](auto v) {
+      if (!v.isOk()) s.problem = v.status().message();
       if (v.isOk() && v->present) {
         s.present = true;
         s.bytes = v->bytes;

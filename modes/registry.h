@@ -57,6 +57,7 @@ struct ModeSection {
   bool present = false;
   uint64_t bytes = 0;
   double bakeSeconds = 0;
+  std::string problem;   // the section is there but unusable (older version, corrupt): why
 };
 ModeSection modeSection(const PackReader& pack, RenderMode m);
 

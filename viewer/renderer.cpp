@@ -286,9 +286,15 @@ Status Renderer::initModes(const PackReader& pack) {
       continue;
     }
     if (!mi.castUnit) continue;
+    // A section this build cannot use (an older version, corrupt) leaves its mode to its fallback,
+    // with the reason (modeProblem); the other modes draw.
+    auto unusable = [&](const Status& s) {
+      modeProblems_[int(mi.mode)] = s.message();
+      return true;
+    };
     if (mi.mode == RenderMode::kExact) {
       auto v = exact::readSection(pack);
-      if (!v.isOk()) return v.status();
+      if (!v.isOk() && unusable(v.status())) continue;
       if (!v->present) continue;  // drawn as its fallback (drawnMode)
       if (v->codeCount >= (uint64_t(1) << 32))
         return Status::badInput(pack.path() + ": the exact mode's maxima exceed 2^32 codes; render with --mode parallax");
@@ -305,14 +311,14 @@ Status Renderer::initModes(const PackReader& pack) {
     }
     if (mi.mode == RenderMode::kGdm) {
       auto v = gdm::readSection(pack);
-      if (!v.isOk()) return v.status();
+      if (!v.isOk() && unusable(v.status())) continue;
       if (!v->present || !g.mipBuf) continue;  // gdm's other cells draw exact
       gdmBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.gdmEntryBuf, g.gdmWordBuf);
       gpuBytes_ += gdmBytes_;
     }
     if (mi.mode == RenderMode::kGrooves) {
       auto v = gcast::readSection(pack);
-      if (!v.isOk()) return v.status();
+      if (!v.isOk() && unusable(v.status())) continue;
       if (!v->present) continue;  // drawn as parallax: a groove neither detected nor given is never drawn
       grooveBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.grooveEntryBuf,
                                   g.grooveWordBuf);
@@ -320,7 +326,7 @@ Status Renderer::initModes(const PackReader& pack) {
     }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
-      if (!v.isOk()) return v.status();
+      if (!v.isOk() && unusable(v.status())) continue;
       if (!v->present || !g.mipBuf) continue;  // vdm needs exact's maxima for its fallback
       vdmBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.vdmEntryBuf, g.vdmWordBuf);
       gpuBytes_ += vdmBytes_;

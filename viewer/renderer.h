@@ -119,6 +119,9 @@ class Renderer {
   // Whether this pack can draw mode m as itself (its section is present), else what it draws.
   bool modeReady(RenderMode m) const;
   RenderMode drawnMode(RenderMode m) const;
+  // Why mode m's section could not be used (an older version, a corrupt section), "" when it could
+  // or the pack has none: the mode then draws its fallback; the other modes are unaffected.
+  const std::string& modeProblem(RenderMode m) const { return modeProblems_[int(m)]; }
   uint64_t modeGpuBytes(RenderMode m) const;
   Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, unsigned readBackMask);
   Status render(const Camera& cam, const RenderSettings& settings, FrameResult& out, bool readDepth) {
@@ -163,6 +166,7 @@ class Renderer {
   uint32_t cellCount_ = 0;
   bool hasColor_ = false, hasNormals_ = false;
   uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0, grooveBytes_ = 0;
+  std::string modeProblems_[kRenderModes];
   double spacing_ = 0;
 };
 

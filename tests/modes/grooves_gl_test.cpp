@@ -439,5 +439,31 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
   EXPECT_GT(nearChanged, 0u);
 }
 
+// A section of an older version (1: tangent-plane rims) is not misread and does not stop the pack
+// from drawing: the grooves mode falls back to parallax with the reason, the other modes draw.
+TEST_F(GroovesGl, AnOlderSectionFallsBackWithTheReason) {
+  test::TempDir dir;
+  PackReader p;
+  ASSERT_TRUE(p.open(makePack(dir, 0.05)).isOk());
+  ExtraSection old;
+  std::memcpy(old.id, gcast::kSectionId, 4);
+  const auto bytes = p.section(gcast::kSectionId);
+  old.bytes.assign(bytes.begin(), bytes.end());
+  ASSERT_GE(old.bytes.size(), 4u);
+  old.bytes[0] = 1;  // the header's version
+  ASSERT_TRUE(rewritePackWithSections(p, dir.file("old.hfa"), {old}).isOk());
+  PackReader q;
+  ASSERT_TRUE(q.open(dir.file("old.hfa")).isOk());
+  Renderer r;
+  Status s = r.init(q);
+  ASSERT_TRUE(s.isOk()) << s.message();
+  EXPECT_FALSE(r.modeReady(RenderMode::kGrooves));
+  EXPECT_EQ(r.drawnMode(RenderMode::kGrooves), RenderMode::kParallax);
+  EXPECT_NE(r.modeProblem(RenderMode::kGrooves).find("version 1"), std::string::npos) << r.modeProblem(RenderMode::kGrooves);
+  EXPECT_NE(modeSection(q, RenderMode::kGrooves).problem.find("bake it again"), std::string::npos);
+  const FrameResult f = render(r, view(64), RenderMode::kParallax);
+  EXPECT_GT(std::count_if(f.depth.begin(), f.depth.end(), [](float d) { return std::isfinite(d); }), 1000);
+}
+
 }  // namespace
 }  // namespace sa
