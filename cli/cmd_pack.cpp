@@ -237,7 +237,7 @@ int cmdPack(int argc, char** argv) {
                 "\"chunks\": %u, \"pages\": %u, \"page_width\": %u, \"page_height\": %u, "
                 "\"texels\": %llu, \"texel_size\": %.9g, \"sample_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
                 "\"up_source\": \"%s\", \"bytes\": %llu, "
-                "\"bytes_per_point\": %.3f, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
+                "\"bytes_per_point\": %.3f, \"scratch_bytes\": %llu, \"scratch_raw_bytes\": %llu, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
                 "\"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
                 (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.layeredCells,
@@ -245,7 +245,7 @@ int cmdPack(int argc, char** argv) {
                 (unsigned long long)sum.texels, sum.texelSize, sum.spacing, sum.up.x(), sum.up.y(), sum.up.z(),
                 upSourceName(sum.upSource),
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
-                sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
+                (unsigned long long)sum.scratchBytes, (unsigned long long)sum.scratchRawBytes, sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
                 sum.hasColor ? "true" : "false");
     for (size_t i = 0; i < sum.cellsPerLevel.size(); ++i) std::printf("%s%u", i ? ", " : "", sum.cellsPerLevel[i]);
     std::printf("], \"seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
@@ -256,7 +256,7 @@ int cmdPack(int argc, char** argv) {
                  "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
                  "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
                  "  up %.3g,%.3g,%.3g (%s)\n"
-                 "  file %.1f MiB (%.1f bytes/point)\n"
+                 "  file %.1f MiB (%.1f bytes/point), temporary chunk files %.1f MiB written\n"
                  "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n",
                  out.c_str(), (unsigned long long)sum.pointsRead,
                  sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
@@ -266,7 +266,8 @@ int cmdPack(int argc, char** argv) {
                  sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
                  sum.normalsEstimated ? ", normals estimated" : "", sum.up.x(), sum.up.y(), sum.up.z(),
                  upSourceName(sum.upSource), sum.fileBytes / 1048576.0,
-                 double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.seconds[5], sum.seconds[0],
+                 double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.scratchBytes / 1048576.0,
+                 sum.seconds[5], sum.seconds[0],
                  sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts);
   }
   return 0;

@@ -107,7 +107,12 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
                         DistributeResult& out, const ProgressFn& progress);
 
 // Reads a chunk file whole.
+// Chunk files hold frames of byte-shuffled, zstd-compressed records (chunker.cpp).
 Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out);
 Status saveChunk(const std::string& path, const std::vector<ChunkPoint>& points);
+// Bytes written to chunk files by this process so far (the summary's temporary bytes).
+uint64_t chunkBytesWritten();
+// The same records uncompressed (36 bytes each).
+uint64_t chunkRecordBytesWritten();
 
 }  // namespace sa

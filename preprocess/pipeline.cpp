@@ -850,6 +850,7 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
       return Status::ok();
     }
   }
+  const uint64_t scratch0 = chunkBytesWritten(), raw0 = chunkRecordBytesWritten();
   sum.fromTriangles = job.triangles;
   sum.normalsEstimated = !job.fileNormals && !job.triangles;
   sum.hasColor = job.color && !job.triangles;
@@ -872,6 +873,8 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   SA_RETURN_IF_ERROR(writer.finish());
   sum.seconds[4] = secondsSince(tw);
   sum.seconds[5] = secondsSince(tStart);
+  sum.scratchBytes = chunkBytesWritten() - scratch0;
+  sum.scratchRawBytes = chunkRecordBytesWritten() - raw0;
   if (progress) progress("write", 1, 1);
   auto sz = fileSize(outPath);
   sum.fileBytes = sz ? *sz : 0;

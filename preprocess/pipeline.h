@@ -38,6 +38,8 @@ struct PackSummary {
   uint32_t cells = 0, forcedCells = 0, degenerateCells = 0, layeredCells = 0, pages = 0, chunks = 0;
   uint32_t pageWidth = 0, pageHeight = 0;
   uint64_t texels = 0, fileBytes = 0;
+  uint64_t scratchBytes = 0;     // written to temporary chunk files (compressed)
+  uint64_t scratchRawBytes = 0;  // the same records uncompressed
   double spacing = 0, areaSpacing = 0, texelSize = 0;
   double seconds[6] = {0, 0, 0, 0, 0, 0};
   std::vector<uint32_t> cellsPerLevel;

@@ -7,7 +7,7 @@ pkgs=(
   libeigen3-dev libflann-dev liblz4-dev libtbb-dev zlib1g-dev libpng-dev libopenmesh-dev
   libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
   libglfw3-dev libimgui-dev libstb-dev xvfb xauth
-  libgtest-dev libgmock-dev libbenchmark-dev nlohmann-json3-dev libxxhash-dev
+  libgtest-dev libgmock-dev libbenchmark-dev nlohmann-json3-dev libxxhash-dev libzstd-dev
   libpcl-dev libdraco-dev
 )
 missing=()
