@@ -504,91 +504,205 @@ void drawPanel(AppState& s, GLFWwindow* win) {
   (void)win;
 }
 
-}  // namespace
 
-int runViewer(const std::string& packPath, const ViewerOptions& opt) {
-  AppState s;
+// The pack, its grooves (--grooves, else the pack's own), the script (read and checked whole before
+// the window opens) and the measurements file. An error names the file; nothing is opened.
+Status loadViewerInputs(AppState& s, const std::string& packPath, const ViewerOptions& opt, std::vector<ScriptCommand>& script) {
   s.packPath = packPath;
   Status st = s.pack.open(packPath);
-  if (!st) {
-    std::fprintf(stderr, "scanatlas: error: %s\n(run 'scanatlas info' on it, or repack)\n", st.message().c_str());
-    return 2;
-  }
-  // The script is read and checked whole before the window opens.
-  std::vector<ScriptCommand> script;
+  if (!st) return Status::badInput(st.message() + "\n(run 'scanatlas info' on it, or repack)");
   std::vector<std::string> inputs = packSources(s.pack);  // the points mode reads them
   inputs.insert(inputs.end(), {packPath, opt.scriptPath, opt.groovesPath});
   if (!opt.groovesPath.empty()) {
     Result<GrooveSet> g = readGroovesJson(opt.groovesPath);
-    if (!g) {
-      std::fprintf(stderr, "scanatlas: error: %s\n", g.status().message().c_str());
-      return 2;
-    }
+    if (!g) return g.status();
     s.grooves = std::move(*g);
   } else {
     // A pack baked with grooves lists them, and draws them carved (--mode grooves) from the start.
     Result<GrooveSet> g = grooves::packGrooves(s.pack);
-    if (!g) {
-      std::fprintf(stderr, "scanatlas: error: %s\n", g.status().message().c_str());
-      return 2;
-    }
+    if (!g) return g.status();
     if (!g->grooves.empty()) s.rs.mode = RenderMode::kGrooves;
     s.grooves = std::move(*g);
   }
   if (!opt.scriptPath.empty()) {
     auto loaded = loadScript(opt.scriptPath, inputs);
-    if (!loaded) {
-      std::fprintf(stderr, "scanatlas: error: %s\n", loaded.status().message().c_str());
-      return 2;
-    }
+    if (!loaded) return loaded.status();
     script = std::move(*loaded);
   }
   if (!opt.measurementsPath.empty()) {
-    Status used = checkNotAnInput(opt.measurementsPath, inputs, "--measurements");
-    if (!used) {
-      std::fprintf(stderr, "scanatlas: error: %s\n", used.message().c_str());
-      return 2;
-    }
-  }
-  if (!opt.measurementsPath.empty()) {
+    SA_RETURN_IF_ERROR(checkNotAnInput(opt.measurementsPath, inputs, "--measurements"));
     s.measureOut = std::fopen(opt.measurementsPath.c_str(), "w");
-    if (!s.measureOut) {
-      std::fprintf(stderr, "scanatlas: error: %s: cannot write measurements\n", opt.measurementsPath.c_str());
-      return 2;
-    }
+    if (!s.measureOut) return Status::badInput(opt.measurementsPath + ": cannot write measurements");
   }
+  return Status::ok();
+}
+
+// A GL 4.5 core window with Dear ImGui on it; nullptr (and a message) when there is no display.
+GLFWwindow* openWindow(const ViewerOptions& opt, const std::string& title, bool vsync) {
   if (!glfwInit()) {
     std::fprintf(stderr, "scanatlas: error: cannot open a window (no display?). Headless: scanatlas render\n");
-    return 1;
+    return nullptr;
   }
   glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
   glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 5);
   glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
   glfwWindowHint(GLFW_SCALE_TO_MONITOR, GLFW_TRUE);
-  const std::string title = "ScanAtlas — " + std::filesystem::path(packPath).filename().string();
   GLFWwindow* win = glfwCreateWindow(opt.width, opt.height, title.c_str(), nullptr, nullptr);
   if (!win) {
     const char* desc = nullptr;
     glfwGetError(&desc);
     std::fprintf(stderr, "scanatlas: error: cannot create an OpenGL 4.5 core window: %s\n", desc ? desc : "unknown");
     glfwTerminate();
-    return 1;
+    return nullptr;
   }
   glfwMakeContextCurrent(win);
-  glfwSwapInterval(opt.vsync && script.empty() ? 1 : 0);
+  glfwSwapInterval(vsync ? 1 : 0);
   IMGUI_CHECKVERSION();
   ImGui::CreateContext();
   ImGui::GetIO().IniFilename = nullptr;
   ImGui_ImplGlfw_InitForOpenGL(win, true);
   ImGui_ImplOpenGL3_Init("#version 450");
-  int rc = 0;
-  const auto tOpen = std::chrono::steady_clock::now();
-  bool firstFrame = true;
-  st = s.renderer->init(s.pack, /*streamPages=*/true);
-  if (!st) {
-    std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
-    rc = 1;
+  return win;
+}
+
+void closeWindow(AppState& s, GLFWwindow* win) {
+  ImGui_ImplOpenGL3_Shutdown();
+  ImGui_ImplGlfw_Shutdown();
+  ImGui::DestroyContext();
+  s.renderer.reset();  // GL objects go while the context is current
+  glfwDestroyWindow(win);
+  glfwTerminate();
+}
+
+// Mouse: left drag orbits about the pivot (a double click sets it), middle or shift-left pans
+// at the depth under the cursor, the wheel zooms toward the cursor.
+struct MouseState {
+  double lastX = 0, lastY = 0, lastClick = -1;
+  bool dragging = false, panning = false;
+  double dragDepth = 1;
+};
+
+void handleMouse(AppState& s, GLFWwindow* win, MouseState& ms, double mx, double my) {
+  ImGuiIO& io = ImGui::GetIO();
+  const Camera& cam = s.cc.camera();
+  if (!io.WantCaptureMouse) {
+    const bool left = glfwGetMouseButton(win, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS;
+    const bool middle = glfwGetMouseButton(win, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS;
+    const bool shift = glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS;
+    if ((left || middle) && !ms.dragging && !ms.panning) {
+      ms.panning = middle || shift;
+      ms.dragging = !ms.panning;
+      const float d = s.renderer->depthAt(int(mx), int(my));
+      ms.dragDepth = std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward());
+      if (left && !shift) {
+        const double t = glfwGetTime();
+        if (t - ms.lastClick < 0.3) {
+          Eigen::Vector3d p;
+          if (pickAt(s, mx, my, p)) {
+            s.pivot = p;
+            s.status = "pivot set";
+          }
+        }
+        ms.lastClick = t;
+      }
+    } else if (ms.dragging && left) {
+      s.cc.orbit(s.pivot, mx - ms.lastX, my - ms.lastY);
+    } else if (ms.panning && (left || middle)) {
+      s.cc.pan(mx - ms.lastX, my - ms.lastY, ms.dragDepth);
+    }
+    if (!left && !middle) ms.dragging = ms.panning = false;
+    if (io.MouseWheel != 0) {
+      const float d = s.renderer->depthAt(int(mx), int(my));
+      const double depth = std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward());
+      s.cc.zoomToCursor(mx, my, depth, std::pow(0.85, io.MouseWheel));
+    }
   }
+  ms.lastX = mx;
+  ms.lastY = my;
+}
+
+// Keys: WASD/QE fly (shift: 4x), F frames all, 1/3/7 presets, P picks, B bookmarks, F12 saves a
+// screenshot, H the help, Esc clears the picks.
+void handleKeys(AppState& s, GLFWwindow* win, double dt, double diag, double mx, double my) {
+  if (ImGui::GetIO().WantCaptureKeyboard) return;
+  const double speed = diag * 0.3 * dt * (glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS ? 4 : 1);
+  auto key = [&](int k) { return glfwGetKey(win, k) == GLFW_PRESS; };
+  s.cc.fly(speed * (key(GLFW_KEY_W) - key(GLFW_KEY_S)), speed * (key(GLFW_KEY_D) - key(GLFW_KEY_A)),
+           speed * (key(GLFW_KEY_E) - key(GLFW_KEY_Q)));
+  if (ImGui::IsKeyPressed(ImGui::GetKeyIndex(ImGuiKey_Escape))) s.picks.clear();
+  if (ImGui::IsKeyPressed(GLFW_KEY_F)) s.cc.frameAll(s.lo, s.hi);
+  if (ImGui::IsKeyPressed(GLFW_KEY_H)) s.showHelp = !s.showHelp;
+  if (ImGui::IsKeyPressed(GLFW_KEY_1) || ImGui::IsKeyPressed(GLFW_KEY_KP_1)) s.cc.preset(CameraController::Preset::kFront, s.lo, s.hi);
+  if (ImGui::IsKeyPressed(GLFW_KEY_3) || ImGui::IsKeyPressed(GLFW_KEY_KP_3)) s.cc.preset(CameraController::Preset::kSide, s.lo, s.hi);
+  if (ImGui::IsKeyPressed(GLFW_KEY_7) || ImGui::IsKeyPressed(GLFW_KEY_KP_7)) s.cc.preset(CameraController::Preset::kTop, s.lo, s.hi);
+  if (ImGui::IsKeyPressed(GLFW_KEY_P)) addPick(s, mx, my);
+  if (ImGui::IsKeyPressed(GLFW_KEY_B)) {
+    Status b = bookmark(s);
+    if (!b) s.status = b.message();
+  }
+  if (ImGui::IsKeyPressed(GLFW_KEY_F12)) {
+    Status b = screenshot(s, s.packPath + ".screenshot.png");
+    if (!b) s.status = b.message();
+  }
+}
+
+// The window's back buffer as asked by the script's `window-screenshot` (panel included).
+void saveWindowShot(AppState& s, int fbw, int fbh) {
+  Image img;
+  img.width = fbw;
+  img.height = fbh;
+  img.rgba.resize(size_t(fbw) * fbh * 4);
+  std::vector<uint8_t> rows(img.rgba.size());
+  glReadBuffer(GL_BACK);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, fbw, fbh, GL_RGBA, GL_UNSIGNED_BYTE, rows.data());
+  for (int y = 0; y < fbh; ++y)
+    std::memcpy(&img.rgba[size_t(y) * fbw * 4], &rows[size_t(fbh - 1 - y) * fbw * 4], size_t(fbw) * 4);
+  for (size_t i = 3; i < img.rgba.size(); i += 4) img.rgba[i] = 255;
+  Status ws = writeImage(s.pendingWindowShot, img);
+  s.status = ws ? "saved " + s.pendingWindowShot : ws.message();
+  s.pendingWindowShot.clear();
+}
+
+// The script: one command per frame, after the frame it acts on has been drawn; its end ends the
+// session. false: a command failed (reported; rc 2).
+struct ScriptRun {
+  const std::vector<ScriptCommand>& commands;
+  size_t line = 0;
+  int waitFrames = 0;
+};
+
+bool scriptStep(AppState& s, GLFWwindow* win, ScriptRun& run, const std::string& path, bool& quit) {
+  if (run.waitFrames > 0) {
+    --run.waitFrames;
+  } else if (run.line < run.commands.size()) {
+    const ScriptCommand& command = run.commands[run.line++];
+    Status cs = runCommand(s, win, command, quit, run.waitFrames);
+    if (!cs) {
+      std::fprintf(stderr, "scanatlas: error: %s:%zu: %s\n", path.c_str(), command.line, cs.message().c_str());
+      quit = true;
+      return false;
+    }
+  } else if (!run.commands.empty()) {
+    quit = true;
+  }
+  return true;
+}
+
+void reportFirstFrame(AppState& s, std::chrono::steady_clock::time_point tOpen) {
+  std::fprintf(stderr, "view: first frame %.0f ms after opening the pack (%s, %u cells, %.1f MiB on the GPU)\n",
+               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tOpen).count(),
+               reinterpret_cast<const char*>(glGetString(GL_RENDERER)), s.pack.meta().cellCount, s.renderer->gpuBytes() / 1048576.0);
+}
+
+void reportMedianFrame(const AppState& s, int fbw, int fbh) {
+  std::vector<float> ft(s.frameMs.begin(), s.frameMs.end());
+  std::sort(ft.begin(), ft.end());
+  std::fprintf(stderr, "view: median frame %.1f ms over the last %zu frames (%dx%d)\n", ft[ft.size() / 2], ft.size(), fbw, fbh);
+}
+
+// The camera's start: the whole pack framed from the first orbit view.
+void initView(AppState& s, GLFWwindow* win) {
   const PackMeta& m = s.pack.meta();
   const Eigen::Vector3d origin(m.origin);
   s.lo = origin + Eigen::Vector3d(m.boundsMin);
@@ -598,12 +712,33 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   s.rs.up = s.pack.viewUp();
   s.cc = CameraController(orbitCameras(s.lo, s.hi, 1, s.rs.up, 40, std::max(fbw, 1), std::max(fbh, 1))[0]);
   s.pivot = s.cc.camera().target;
-  size_t scriptLine = 0;
-  int waitFrames = 0;
-  bool quit = rc != 0;
-  double lastX = 0, lastY = 0, lastClick = -1;
-  bool dragging = false, panning = false;
-  double dragDepth = 1;
+}
+
+}  // namespace
+
+int runViewer(const std::string& packPath, const ViewerOptions& opt) {
+  AppState s;
+  std::vector<ScriptCommand> script;
+  Status st = loadViewerInputs(s, packPath, opt, script);
+  if (!st) {
+    std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
+    return 2;
+  }
+  const std::string title = "ScanAtlas — " + std::filesystem::path(packPath).filename().string();
+  GLFWwindow* win = openWindow(opt, title, opt.vsync && script.empty());
+  if (!win) return 1;
+  int rc = 0;
+  const auto tOpen = std::chrono::steady_clock::now();
+  st = s.renderer->init(s.pack, /*streamPages=*/true);
+  if (!st) {
+    std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
+    rc = 1;
+  }
+  initView(s, win);
+  int fbw = 0, fbh = 0;
+  ScriptRun run{script};
+  MouseState mouse;
+  bool quit = rc != 0, firstFrame = true;
   auto lastTime = std::chrono::steady_clock::now();
   const double diag = (s.hi - s.lo).norm();
   while (!quit && !glfwWindowShouldClose(win)) {
@@ -620,67 +755,12 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
-    ImGuiIO& io = ImGui::GetIO();
     double mx, my;
     glfwGetCursorPos(win, &mx, &my);
     mx *= scale;
     my *= scale;
-    const Camera& cam = s.cc.camera();
-    if (!io.WantCaptureMouse) {
-      const bool left = glfwGetMouseButton(win, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS;
-      const bool middle = glfwGetMouseButton(win, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS;
-      const bool shift = glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS;
-      if ((left || middle) && !dragging && !panning) {
-        panning = middle || shift;
-        dragging = !panning;
-        const float d = s.renderer->depthAt(int(mx), int(my));
-        dragDepth = std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward());
-        if (left && !shift) {
-          const double t = glfwGetTime();
-          if (t - lastClick < 0.3) {
-            Eigen::Vector3d p;
-            if (pickAt(s, mx, my, p)) {
-              s.pivot = p;
-              s.status = "pivot set";
-            }
-          }
-          lastClick = t;
-        }
-      } else if (dragging && left) {
-        s.cc.orbit(s.pivot, mx - lastX, my - lastY);
-      } else if (panning && (left || middle)) {
-        s.cc.pan(mx - lastX, my - lastY, dragDepth);
-      }
-      if (!left && !middle) dragging = panning = false;
-      if (io.MouseWheel != 0) {
-        const float d = s.renderer->depthAt(int(mx), int(my));
-        const double depth = std::isfinite(d) ? double(d) : (s.pivot - cam.eye).dot(cam.forward());
-        s.cc.zoomToCursor(mx, my, depth, std::pow(0.85, io.MouseWheel));
-      }
-    }
-    lastX = mx;
-    lastY = my;
-    if (!io.WantCaptureKeyboard) {
-      const double speed = diag * 0.3 * dt * (glfwGetKey(win, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS ? 4 : 1);
-      auto key = [&](int k) { return glfwGetKey(win, k) == GLFW_PRESS; };
-      s.cc.fly(speed * (key(GLFW_KEY_W) - key(GLFW_KEY_S)), speed * (key(GLFW_KEY_D) - key(GLFW_KEY_A)),
-               speed * (key(GLFW_KEY_E) - key(GLFW_KEY_Q)));
-      if (ImGui::IsKeyPressed(ImGui::GetKeyIndex(ImGuiKey_Escape))) s.picks.clear();
-      if (ImGui::IsKeyPressed(GLFW_KEY_F)) s.cc.frameAll(s.lo, s.hi);
-      if (ImGui::IsKeyPressed(GLFW_KEY_H)) s.showHelp = !s.showHelp;
-      if (ImGui::IsKeyPressed(GLFW_KEY_1) || ImGui::IsKeyPressed(GLFW_KEY_KP_1)) s.cc.preset(CameraController::Preset::kFront, s.lo, s.hi);
-      if (ImGui::IsKeyPressed(GLFW_KEY_3) || ImGui::IsKeyPressed(GLFW_KEY_KP_3)) s.cc.preset(CameraController::Preset::kSide, s.lo, s.hi);
-      if (ImGui::IsKeyPressed(GLFW_KEY_7) || ImGui::IsKeyPressed(GLFW_KEY_KP_7)) s.cc.preset(CameraController::Preset::kTop, s.lo, s.hi);
-      if (ImGui::IsKeyPressed(GLFW_KEY_P)) addPick(s, mx, my);
-      if (ImGui::IsKeyPressed(GLFW_KEY_B)) {
-        Status b = bookmark(s);
-        if (!b) s.status = b.message();
-      }
-      if (ImGui::IsKeyPressed(GLFW_KEY_F12)) {
-        Status b = screenshot(s, s.packPath + ".screenshot.png");
-        if (!b) s.status = b.message();
-      }
-    }
+    handleMouse(s, win, mouse, mx, my);
+    handleKeys(s, win, dt, diag, mx, my);
     // The scene.
     FrameResult fr;
     Status rst = s.renderer->render(s.cc.camera(), s.rs, fr, 0u);
@@ -692,20 +772,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     s.stats = fr.stats;
     s.frameMs.push_back(float(fr.stats.cpuMs));
     if (s.frameMs.size() > 120) s.frameMs.pop_front();
-    // Script: one command per frame, after the frame it acts on has been drawn.
-    if (waitFrames > 0) {
-      --waitFrames;
-    } else if (scriptLine < script.size()) {
-      const ScriptCommand& command = script[scriptLine++];
-      Status cs = runCommand(s, win, command, quit, waitFrames);
-      if (!cs) {
-        std::fprintf(stderr, "scanatlas: error: %s:%zu: %s\n", opt.scriptPath.c_str(), command.line, cs.message().c_str());
-        rc = 2;
-        quit = true;
-      }
-    } else if (!script.empty()) {
-      quit = true;  // a script ends the session
-    }
+    if (!scriptStep(s, win, run, opt.scriptPath, quit)) rc = 2;
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     glViewport(0, 0, fbw, fbh);
     s.renderer->present(fbw, fbh);
@@ -713,46 +780,16 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     drawPanel(s, win);
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-    if (!s.pendingWindowShot.empty()) {
-      Image img;
-      img.width = fbw;
-      img.height = fbh;
-      img.rgba.resize(size_t(fbw) * fbh * 4);
-      std::vector<uint8_t> rows(img.rgba.size());
-      glReadBuffer(GL_BACK);
-      glPixelStorei(GL_PACK_ALIGNMENT, 1);
-      glReadPixels(0, 0, fbw, fbh, GL_RGBA, GL_UNSIGNED_BYTE, rows.data());
-      for (int y = 0; y < fbh; ++y)
-        std::memcpy(&img.rgba[size_t(y) * fbw * 4], &rows[size_t(fbh - 1 - y) * fbw * 4], size_t(fbw) * 4);
-      for (size_t i = 3; i < img.rgba.size(); i += 4) img.rgba[i] = 255;
-      Status ws = writeImage(s.pendingWindowShot, img);
-      s.status = ws ? "saved " + s.pendingWindowShot : ws.message();
-      s.pendingWindowShot.clear();
-    }
+    if (!s.pendingWindowShot.empty()) saveWindowShot(s, fbw, fbh);
     char t[256];
-    std::snprintf(t, sizeof(t), "%s — %.1f ms%s", title.c_str(), fr.stats.cpuMs,
-                  s.renderer->pagesPending() ? " (loading pages)" : "");
+    std::snprintf(t, sizeof(t), "%s — %.1f ms%s", title.c_str(), fr.stats.cpuMs, s.renderer->pagesPending() ? " (loading pages)" : "");
     glfwSetWindowTitle(win, t);
     glfwSwapBuffers(win);
-    if (firstFrame && !opt.quiet) {
-      std::fprintf(stderr, "view: first frame %.0f ms after opening the pack (%s, %u cells, %.1f MiB on the GPU)\n",
-                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tOpen).count(),
-                   reinterpret_cast<const char*>(glGetString(GL_RENDERER)), s.pack.meta().cellCount,
-                   s.renderer->gpuBytes() / 1048576.0);
-    }
+    if (firstFrame && !opt.quiet) reportFirstFrame(s, tOpen);
     firstFrame = false;
   }
-  if (!opt.quiet && !s.frameMs.empty()) {
-    std::vector<float> ft(s.frameMs.begin(), s.frameMs.end());
-    std::sort(ft.begin(), ft.end());
-    std::fprintf(stderr, "view: median frame %.1f ms over the last %zu frames (%dx%d)\n", ft[ft.size() / 2], ft.size(), fbw, fbh);
-  }
-  ImGui_ImplOpenGL3_Shutdown();
-  ImGui_ImplGlfw_Shutdown();
-  ImGui::DestroyContext();
-  s.renderer.reset();  // GL objects go while the context is current
-  glfwDestroyWindow(win);
-  glfwTerminate();
+  if (!opt.quiet && !s.frameMs.empty()) reportMedianFrame(s, fbw, fbh);
+  closeWindow(s, win);
   if (s.measureOut != stdout) std::fclose(s.measureOut);
   return rc;
 }
