@@ -118,6 +118,7 @@ struct Renderer::Gl {
   // Per surface mode (indexed by RenderMode): programs for boxes the camera is outside of
   // (front faces) and inside of (back faces); 0 where the mode cannot draw this pack.
   GLuint front[kRenderModes] = {}, inside[kRenderModes] = {};
+  GLuint grooveFlatFront = 0, grooveFlatInside = 0;  // grooves without the search for floors above h
   GLuint splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
@@ -146,7 +147,7 @@ struct Renderer::Gl {
   GLint ssboAlign = 256;  // GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT
   int fbW = 0, fbH = 0;
   ~Gl() {
-    for (GLuint p : {splat, points, edl, boxes})
+    for (GLuint p : {splat, points, edl, boxes, grooveFlatFront, grooveFlatInside})
       if (p) glDeleteProgram(p);
     for (int m = 0; m < kRenderModes; ++m)
       for (GLuint p : {front[m], inside[m]})
@@ -323,6 +324,15 @@ Status Renderer::initModes(const PackReader& pack) {
       grooveBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.grooveEntryBuf,
                                   g.grooveWordBuf);
       gpuBytes_ += grooveBytes_;
+      grooveKind_.assign(v->header.cellCount, 0);
+      for (uint32_t i = 0; i < v->header.cellCount; ++i) {
+        if (v->entries[i] == gcast::kNoEntry) continue;
+        float rise;
+        std::memcpy(&rise, &v->words[v->entries[i] + 5], 4);
+        grooveKind_[i] = rise > 0 ? 2 : 1;
+      }
+      SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n#define GROOVES_FLAT 1\n", g.grooveFlatFront, mi.castUnit));
+      SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define GROOVES_FLAT 1\n", g.grooveFlatInside, mi.castUnit));
     }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
@@ -521,17 +531,36 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   st.inside = static_cast<uint32_t>(vis.inside.size());
   st.splats = static_cast<uint32_t>(vis.splats.size());
   st.sliced = static_cast<uint32_t>(vis.sliced.size());
+  // grooves: the boxes of cells with grooves apart, by the program that draws them.
+  for (auto& l : grooveLists_) l.clear();
+  if (s.mode == RenderMode::kGrooves && !grooveKind_.empty()) {
+    for (int side = 0; side < 2; ++side) {
+      std::vector<DrawItem>& list = side ? vis.inside : vis.front;
+      size_t keep = 0;
+      for (const DrawItem& it : list) {
+        const uint8_t k = it.cell < grooveKind_.size() ? grooveKind_[it.cell] : 0;
+        if (k == 0) list[keep++] = it;
+        else grooveLists_[(k - 1) * 2 + side].push_back(it);
+      }
+      list.resize(keep);
+    }
+  }
+  const auto order = drawOrder(vis);
   size_t bytes = 0;
-  for (const auto* list : {&vis.front, &vis.inside, &vis.splats, &vis.sliced}) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
+  for (const auto* list : order) bytes += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
   if (GLsizeiptr(bytes) > g.itemCapacity) {
     g.itemCapacity = GLsizeiptr(std::max<size_t>(bytes, 4096));
     glNamedBufferData(g.itemBuf, g.itemCapacity, nullptr, GL_STREAM_DRAW);
   }
   size_t off = 0;
-  for (const auto* list : {&vis.front, &vis.inside, &vis.splats, &vis.sliced}) {
+  for (const auto* list : order) {
     if (!list->empty()) glNamedBufferSubData(g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)), list->data());
     off += alignUp(list->size() * sizeof(DrawItem), g.ssboAlign);
   }
+}
+
+std::vector<const std::vector<DrawItem>*> Renderer::drawOrder(const VisibleSet& vis) const {
+  return {&vis.front, &vis.inside, &vis.splats, &vis.sliced, &grooveLists_[0], &grooveLists_[1], &grooveLists_[2], &grooveLists_[3]};
 }
 
 // Uniforms every surface program reads: camera, projection, shading, clipping.
@@ -636,8 +665,10 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     drawSlices(vis.front, s.slices, kAutoSlices);
     drawSlices(vis.inside, s.slices, kAutoSlices);
   } else {
-    drawList(vis.front, g.front[m], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
-    drawList(vis.inside, g.inside[m], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+    // (grooves: these are the cells without grooves, drawn by parallax's programs; below, the others)
+    const int plain = RenderMode(m) == RenderMode::kGrooves ? int(RenderMode::kParallax) : m;
+    drawList(vis.front, g.front[plain], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
+    drawList(vis.inside, g.inside[plain], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
   }
   glDisable(GL_CULL_FACE);
   drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
@@ -645,6 +676,12 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   int autoMax = 2;
   while (autoMax < kAutoSlices && autoMax < s.autoPixels) autoMax *= 2;
   drawSlices(vis.sliced, 0, autoMax);
+  glEnable(GL_CULL_FACE);
+  const int gm = int(RenderMode::kGrooves);
+  drawList(grooveLists_[0], g.grooveFlatFront, GL_BACK, GL_TRIANGLES, 36);
+  drawList(grooveLists_[1], g.grooveFlatInside, GL_FRONT, GL_TRIANGLES, 36);
+  drawList(grooveLists_[2], g.front[gm], GL_BACK, GL_TRIANGLES, 36);
+  drawList(grooveLists_[3], g.inside[gm], GL_FRONT, GL_TRIANGLES, 36);
   glDisable(GL_CULL_FACE);
   if (!s.showBoxes) return;
   // The decomposition view: every drawn box's edges, depth-tested against the surface.
@@ -654,8 +691,8 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   glDepthMask(GL_FALSE);
   glDepthFunc(GL_GEQUAL);
   setCommonUniforms(g.boxes, f, s);
-  for (const auto* list : {&vis.front, &vis.inside}) {
-    if (!list->empty()) {
+  for (const auto* list : drawOrder(vis)) {
+    if (!list->empty() && list != &vis.splats && list != &vis.sliced) {
       glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 1, g.itemBuf, GLintptr(off), GLsizeiptr(list->size() * sizeof(DrawItem)));
       glDrawArraysInstanced(GL_LINES, 0, 24, GLsizei(list->size()));
     }

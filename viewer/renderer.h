@@ -167,6 +167,14 @@ class Renderer {
   bool hasColor_ = false, hasNormals_ = false;
   uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0, grooveBytes_ = 0;
   std::string modeProblems_[kRenderModes];
+  // grooves: per cell 0 (no grooves: drawn by the parallax programs), 1 (grooves, no floor above
+  // the height field: the program without that search), 2 (the whole cast); this frame's boxes of
+  // kinds 1 and 2, camera outside / inside (a mode's shader costs on every pixel of every box it
+  // draws, taken branches or not, so a box gets the least program that draws it exactly).
+  std::vector<uint8_t> grooveKind_;
+  std::vector<DrawItem> grooveLists_[4];  // flat front, flat inside, rise front, rise inside
+  // The frame's draw lists in upload order (their offsets in the item buffer follow it).
+  std::vector<const std::vector<DrawItem>*> drawOrder(const VisibleSet& vis) const;
   double spacing_ = 0;
 };
 

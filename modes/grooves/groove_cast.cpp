@@ -89,11 +89,16 @@ bool onSurface(const PackReader& pack, const CellRecord& c, const Eigen::Vector3
   return false;
 }
 
-// The lowest point of piece p's floor over its capsule: the lower of its ends' parabolas' minima
-// over x in [-lip, lip] (along, the rim mixes the two), less the profile's deepest sample.
+// The lowest point of piece p's floor over its capsule: the rim is linear in s for each x, so its
+// least over the capsule's s range (a lip past either end) is at one end of that range: the
+// lower of those two parabolas' minima over x in [-lip, lip], less the profile's deepest sample.
 double lowestFloor(const Piece& p, const float* profile) {
   double low = std::numeric_limits<double>::infinity();
-  for (const double* q : p.rimQ) {
+  const double e = p.length > 0 ? p.lip / p.length : 0.0;
+  for (int end = 0; end < 2; ++end) {
+    const double* a = p.rimQ[end];
+    const double* b = p.rimQ[1 - end];
+    const double q[3] = {(1 + e) * a[0] - e * b[0], (1 + e) * a[1] - e * b[1], (1 + e) * a[2] - e * b[2]};
     auto at = [&](double x) { return q[0] + q[1] * x + q[2] * x * x; };
     low = std::min({low, at(-p.lip), at(p.lip)});
     if (q[2] > 0 && std::abs(q[1] / (2 * q[2])) < p.lip) low = std::min(low, at(-q[1] / (2 * q[2])));
@@ -428,7 +433,9 @@ double HeightField::operator()(double u, double v) const { return exact::surface
 double HeightField::texel() const { return texelOf(*cell); }
 
 double pieceRim(const Piece& p, double s, double x, Eigen::Vector2d* gradient) {
-  const double fs = p.length > 0 ? std::clamp(s / p.length, 0.0, 1.0) : 0.0;
+  // Along, linear between the ends and on past them (the rounded ends follow the surface's slope
+  // along the line, as the sides follow it across).
+  const double fs = p.length > 0 ? s / p.length : 0.0;
   const double xc = std::clamp(x, -p.lip, p.lip);
   const double* q0 = p.rimQ[0];
   const double* q1 = p.rimQ[1];
@@ -436,7 +443,7 @@ double pieceRim(const Piece& p, double s, double x, Eigen::Vector2d* gradient) {
   if (gradient) {
     const double dx0 = q0[1] + 2 * q0[2] * xc, dx1 = q1[1] + 2 * q1[2] * xc;
     *gradient = std::abs(x) < p.lip ? Eigen::Vector2d(across(p) * (dx0 + (dx1 - dx0) * fs)) : Eigen::Vector2d::Zero();
-    if (p.length > 0 && s > 0 && s < p.length) *gradient += p.e * ((r1 - r0) / p.length);
+    if (p.length > 0) *gradient += p.e * ((r1 - r0) / p.length);
   }
   return r0 + (r1 - r0) * fs;
 }

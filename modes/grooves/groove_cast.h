@@ -47,7 +47,7 @@ struct Piece {
   // The rim: at the start (end 0) and the end (end 1) a parabola across, rim = q[0] + q[1] x +
   // q[2] x^2 (x across the line), fitted to the height field on both sides over a band just
   // outside the lips (past the reach of the reconstruction's blur of the crack); along, the
-  // coefficients linear between the ends (s clamped to the segment).
+  // coefficients linear between the ends and on past them (the rounded ends).
   double rimQ[2][3] = {{0, 0, 0}, {0, 0, 0}};
   double lip = 0;  // the capsule's radius: half a width, a texel (and two sample spacings for points)
   uint32_t groove = 0;  // its profile

@@ -78,14 +78,14 @@ float gDepth(uint prof, float r, float hw, out float slope) {
 
 // The rim at the point (s, x) of the piece's frame (groove_cast.cpp pieceRim): across, the
 // parabola fitted outside the lips (x clamped to them); along, its coefficients linear between
-// the ends (s clamped to the segment); grad: its gradient (shading).
+// the ends and on past them; grad: its gradient (shading).
 float gRim(GPiece p, float s, float x, out vec2 grad) {
-  float fs = p.len > 0.0 ? clamp(s / p.len, 0.0, 1.0) : 0.0;
+  float fs = p.len > 0.0 ? s / p.len : 0.0;
   float xc = clamp(x, -p.lip, p.lip);
   vec3 b = vec3(1.0, xc, xc * xc);
   vec3 k = mix(p.rim0, p.rim1, fs);
   grad = abs(x) < p.lip ? vec2(-p.e.y, p.e.x) * (k.y + 2.0 * k.z * xc) : vec2(0.0);
-  if (p.len > 0.0 && s > 0.0 && s < p.len) grad += p.e * (dot(p.rim1, b) - dot(p.rim0, b)) / p.len;
+  if (p.len > 0.0) grad += p.e * (dot(p.rim1, b) - dot(p.rim0, b)) / p.len;
   return dot(k, b);
 }
 
@@ -319,6 +319,7 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces
     // near them): each such piece's first floor crossing inside its capsule over the stretch.
     float reach = length(d.xy) * (tH - ta), best = 1e30;
+#ifndef GROOVES_FLAT  // (cells whose floors never rise above h are drawn without it)
     for (int e = 0; e < (rise > 0.0 ? 2 : 0); ++e) {
       vec2 qe = (o + d * (e == 0 ? tH : ta)).xy;
       int b = gBin(c, blk, qe);
@@ -333,6 +334,8 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
         if (tc >= 0.0) best = min(best, tc);
       }
     }
+#endif
+
     if (best < tH) {
       // On a floor: solid unless in another groove's air (the advance below goes on from there).
       t = best;
