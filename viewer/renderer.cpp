@@ -325,12 +325,8 @@ Status Renderer::initModes(const PackReader& pack) {
                                   g.grooveWordBuf);
       gpuBytes_ += grooveBytes_;
       grooveKind_.assign(v->header.cellCount, 0);
-      for (uint32_t i = 0; i < v->header.cellCount; ++i) {
-        if (v->entries[i] == gcast::kNoEntry) continue;
-        float rise;
-        std::memcpy(&rise, &v->words[v->entries[i] + 5], 4);
-        grooveKind_[i] = rise > 0 ? 2 : 1;
-      }
+      for (uint32_t i = 0; i < v->header.cellCount; ++i)
+        if (v->entries[i] != gcast::kNoEntry) grooveKind_[i] = gcast::blockRise(*v, i) > 0 ? 2 : 1;
       SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n#define GROOVES_FLAT 1\n", g.grooveFlatFront, mi.castUnit));
       SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define GROOVES_FLAT 1\n", g.grooveFlatInside, mi.castUnit));
     }
@@ -559,7 +555,7 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   }
 }
 
-std::vector<const std::vector<DrawItem>*> Renderer::drawOrder(const VisibleSet& vis) const {
+std::array<const std::vector<DrawItem>*, 8> Renderer::drawOrder(const VisibleSet& vis) const {
   return {&vis.front, &vis.inside, &vis.splats, &vis.sliced, &grooveLists_[0], &grooveLists_[1], &grooveLists_[2], &grooveLists_[3]};
 }
 

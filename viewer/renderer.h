@@ -5,6 +5,7 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -174,7 +175,7 @@ class Renderer {
   std::vector<uint8_t> grooveKind_;
   std::vector<DrawItem> grooveLists_[4];  // flat front, flat inside, rise front, rise inside
   // The frame's draw lists in upload order (their offsets in the item buffer follow it).
-  std::vector<const std::vector<DrawItem>*> drawOrder(const VisibleSet& vis) const;
+  std::array<const std::vector<DrawItem>*, 8> drawOrder(const VisibleSet& vis) const;
   double spacing_ = 0;
 };
 

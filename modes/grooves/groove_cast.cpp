@@ -365,6 +365,13 @@ Result<SectionView> readSection(const PackReader& pack) {
   return v;
 }
 
+float blockRise(const SectionView& v, uint32_t cell) {
+  if (!v.present || cell >= v.header.cellCount || v.entries[cell] == kNoEntry) return 0;
+  float rise;
+  std::memcpy(&rise, &v.words[v.entries[cell] + 5], 4);
+  return rise;
+}
+
 Model modelFromSection(const PackReader& pack, const SectionView& v) {
   Model m;
   if (!v.present) return m;
@@ -384,7 +391,7 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
     cp.grid = int(v.words[b]);
     const uint32_t n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
     cp.floor = f(b + 4);
-    cp.rise = f(b + 5);
+    cp.rise = blockRise(v, i);
     cp.bins.resize(size_t(cp.grid) * cp.grid);
     for (size_t k = 0; k < cp.bins.size(); ++k) {
       const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];

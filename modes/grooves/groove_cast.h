@@ -114,6 +114,8 @@ struct SectionView {
   uint64_t bytes = 0;
 };
 Result<SectionView> readSection(const PackReader& pack);
+// How far cell i's floors rise above its height field (its block's f32 `rise`; 0 without a block).
+float blockRise(const SectionView& v, uint32_t cell);
 Model modelFromSection(const PackReader& pack, const SectionView& v);
 
 // --- the cast (the shader's grooves.glsl in double) ---
