@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -10,11 +11,43 @@
 namespace sa {
 namespace {
 
-constexpr int kBits = 21;
 constexpr int64_t kMaxDim = int64_t(1) << 20;
 constexpr int kMaxRing = 3;  // beyond: every cell, pruned by its distance
 
 uint64_t hashKey(uint64_t k) { return k * 0x9E3779B97F4A7C15ull; }
+
+// Morton order: the bits of x, y and z interleaved, so cells close in space are mostly close in
+// the sorted order (a point's neighbours then lie in nearby memory, also for callers that
+// process points in the grid's order).
+uint64_t spread(uint64_t v) {  // 21 bits -> every third bit of 63
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffull;
+  v = (v | v << 16) & 0x1f0000ff0000ffull;
+  v = (v | v << 8) & 0x100f00f00f00f00full;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+  v = (v | v << 2) & 0x1249249249249249ull;
+  return v;
+}
+
+// Per-thread buffers of nearest() (it runs for every point: no allocation per call).
+std::vector<double>& scratchD2() {
+  thread_local std::vector<double> v;
+  return v;
+}
+std::vector<double>& scratchSel() {
+  thread_local std::vector<double> v;
+  return v;
+}
+
+uint64_t compact(uint64_t v) {  // the inverse of spread
+  v &= 0x1249249249249249ull;
+  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ull;
+  v = (v ^ (v >> 4)) & 0x100f00f00f00f00full;
+  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffull;
+  v = (v ^ (v >> 16)) & 0x1f00000000ffffull;
+  v = (v ^ (v >> 32)) & 0x1fffff;
+  return v;
+}
 
 }  // namespace
 
@@ -30,18 +63,26 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
   if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;
   if (extent / cell_ >= double(kMaxDim - 1)) cell_ = extent / double(kMaxDim - 2);
   for (int a = 0; a < 3; ++a) dims_[a] = n ? int64_t(std::floor((hi[a] - lo_[a]) / cell_)) + 1 : 1;
+  // (key, index) pairs are unique: the parallel sort's result does not depend on scheduling.
   std::vector<std::pair<uint64_t, uint32_t>> keyed(n);
-  for (size_t i = 0; i < n; ++i) {
-    int64_t c[3];
-    coords(i, c);
-    keyed[i] = {keyOf(c[0], c[1], c[2]), uint32_t(i)};
-  }
-  std::sort(keyed.begin(), keyed.end());
+  constexpr size_t kGrain = 1 << 14;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      int64_t c[3];
+      coords(i, c);
+      keyed[i] = {keyOf(c[0], c[1], c[2]), uint32_t(i)};
+    }
+  });
+  tbb::parallel_sort(keyed.begin(), keyed.end());
   order_.resize(n);
   sorted_.resize(3 * n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      order_[i] = keyed[i].second;
+      for (int a = 0; a < 3; ++a) sorted_[3 * i + a] = pos[3 * size_t(keyed[i].second) + a];
+    }
+  });
   for (size_t i = 0; i < n; ++i) {
-    order_[i] = keyed[i].second;
-    for (int a = 0; a < 3; ++a) sorted_[3 * i + a] = pos[3 * size_t(keyed[i].second) + a];
     if (i == 0 || keyed[i].first != keyed[i - 1].first) cells_.push_back({keyed[i].first, uint32_t(i), uint32_t(i)});
     cells_.back().end = uint32_t(i + 1);
   }
@@ -57,7 +98,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
 }
 
 uint64_t GridKnn::keyOf(int64_t x, int64_t y, int64_t z) const {
-  return uint64_t(x) | (uint64_t(y) << kBits) | (uint64_t(z) << (2 * kBits));
+  return spread(uint64_t(x)) | spread(uint64_t(y)) << 1 | spread(uint64_t(z)) << 2;
 }
 
 void GridKnn::coords(size_t i, int64_t c[3]) const {
@@ -136,9 +177,7 @@ void GridKnn::nearest(size_t i, const Candidates& cand, int k,
   }
   // Far from everything (an outlier, a sparse fringe): every cell that can hold a closer point.
   for (const Cell& cc : cells_) {
-    const int64_t x = int64_t(cc.key & ((1u << kBits) - 1)), y = int64_t((cc.key >> kBits) & ((1u << kBits) - 1)),
-                  z = int64_t(cc.key >> (2 * kBits));
-    const int64_t cx[3] = {x, y, z};
+    const int64_t cx[3] = {int64_t(compact(cc.key)), int64_t(compact(cc.key >> 1)), int64_t(compact(cc.key >> 2))};
     double d2 = 0;
     for (int a = 0; a < 3; ++a) {
       const double b0 = lo_[a] + double(cx[a]) * cell_, b1 = b0 + cell_;

@@ -40,6 +40,9 @@ class GridKnn {
   void query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const;
 
   double cell() const { return cell_; }
+  // Point indices in the grid's order: by cell, cells in Morton order (close in space, mostly
+  // close in this order), within a cell by index.
+  const std::vector<uint32_t>& order() const { return order_; }
 
  private:
   struct Cell {

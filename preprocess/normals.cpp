@@ -4,6 +4,7 @@
 
 #include <flann/flann.hpp>
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
@@ -42,33 +43,41 @@ struct LocalSurface {
 
 LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* ind, const double* dist2, int k) {
   LocalSurface ls;
+  // The neighbours relative to p, gathered once (each pass below reads them again).
+  std::array<Eigen::Vector3d, 64> d;
+  std::array<double, 64> wt;
+  const int kk = std::min(k, 64);
+  int cnt = 0;
   double h2 = 0;
-  for (int j = 0; j < k; ++j)
+  for (int j = 0; j < kk; ++j) {
+    if (ind[j] < 0) continue;
+    d[size_t(cnt)] = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p;
+    wt[size_t(cnt)] = dist2[j];
+    h2 = std::max(h2, dist2[j]);
+    ++cnt;
+  }
+  for (int j = kk; j < k; ++j)
     if (ind[j] >= 0) h2 = std::max(h2, dist2[j]);
   if (!(h2 > 0)) return ls;
   ls.radius = std::sqrt(h2);
+  if (cnt < 3) return ls;
   // Weights exp(-d^2 / h^2) with h the neighbourhood radius (PCL's default Gaussian).
   double wsum = 0;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  std::array<double, 64> wt{};
-  const int kk = std::min(k, 64);
-  int cnt = 0;
-  for (int j = 0; j < kk; ++j) {
-    if (ind[j] < 0) continue;
-    wt[size_t(j)] = std::exp(-dist2[j] / h2);
+  for (int j = 0; j < cnt; ++j) {
+    wt[size_t(j)] = std::exp(-wt[size_t(j)] / h2);
     wsum += wt[size_t(j)];
-    mean += wt[size_t(j)] * (Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p);
-    ++cnt;
+    mean += wt[size_t(j)] * d[size_t(j)];
   }
-  if (cnt < 3) return ls;
   mean /= wsum;
+  for (int j = 0; j < cnt; ++j) d[size_t(j)] -= mean;  // from here on relative to the weighted centroid
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (int j = 0; j < kk; ++j) {
-    if (ind[j] < 0) continue;
-    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p - mean;
-    cov += wt[size_t(j)] * d * d.transpose();
-  }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  for (int j = 0; j < cnt; ++j) cov += wt[size_t(j)] * d[size_t(j)] * d[size_t(j)].transpose();
+  // Closed form (Eigen's computeDirect, like PCL's eigen33): the normal's eigenvalue is well apart
+  // from the others on a surface, where the closed form is as good as the iterative solver at a
+  // fraction of its cost.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(cov);
   const Eigen::Vector3d l = es.eigenvalues();
   if (es.info() != Eigen::Success || !(l[1] > 1e-12 * l[2]) || !(l[2] > 0)) return ls;  // collinear / duplicates
   const Eigen::Vector3d n = es.eigenvectors().col(0).normalized();
@@ -80,16 +89,18 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   // Quadric z = c0 + c1 x + c2 y + c3 x^2 + c4 xy + c5 y^2 in (u, v, n) about the weighted
   // centroid, coordinates scaled by h (conditioning).
   const double h = ls.radius;
+  std::array<Eigen::Vector3d, 64> xyz;  // (x, y, z) in that frame
   Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-  for (int j = 0; j < kk; ++j) {
-    if (ind[j] < 0) continue;
-    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p - mean;
-    const double x = d.dot(u) / h, y = d.dot(v) / h, z = d.dot(n) / h;
-    Eigen::Matrix<double, 6, 1> f;
-    f << 1, x, y, x * x, x * y, y * y;
-    A.selfadjointView<Eigen::Lower>().rankUpdate(f, wt[size_t(j)]);
-    b += wt[size_t(j)] * z * f;
+  for (int j = 0; j < cnt; ++j) {
+    const double x = d[size_t(j)].dot(u) / h, y = d[size_t(j)].dot(v) / h, z = d[size_t(j)].dot(n) / h;
+    xyz[size_t(j)] = {x, y, z};
+    const double f[6] = {1, x, y, x * x, x * y, y * y}, w = wt[size_t(j)];
+    for (int r = 0; r < 6; ++r) {  // the lower triangle of A += w f f^T (Eigen's rankUpdate is a call per row)
+      const double wf = w * f[r];
+      for (int q = 0; q <= r; ++q) A(r, q) += wf * f[q];
+      b[r] += wf * z;
+    }
   }
   A = A.selfadjointView<Eigen::Lower>();
   A.diagonal().array() += 1e-9 * A.trace();
@@ -97,16 +108,14 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   const Eigen::Matrix<double, 6, 1> c = ldlt.solve(b);
   if (ldlt.info() != Eigen::Success || !c.allFinite()) return ls;
   double se = 0;
-  for (int j = 0; j < kk; ++j) {
-    if (ind[j] < 0) continue;
-    const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(ind[j])]) - p - mean;
-    const double x = d.dot(u) / h, y = d.dot(v) / h, z = d.dot(n) / h;
+  for (int j = 0; j < cnt; ++j) {
+    const double x = xyz[size_t(j)].x(), y = xyz[size_t(j)].y(), z = xyz[size_t(j)].z();
     const double r = z - (c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y);
     se += wt[size_t(j)] * r * r;
   }
   ls.residual = std::sqrt(se / wsum) * h;
-  const Eigen::Vector3d d = -mean;  // the point itself relative to the centroid
-  const double x = d.dot(u) / h, y = d.dot(v) / h;
+  const Eigen::Vector3d dp = -mean;  // the point itself relative to the centroid
+  const double x = dp.dot(u) / h, y = dp.dot(v) / h;
   const double z = c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y;
   ls.projected = p + mean + (x * u + y * v + z * n) * h;
   const double fx = c[1] + 2 * c[3] * x + c[4] * y, fy = c[2] + c[4] * x + 2 * c[5] * y;
@@ -122,40 +131,61 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
 // from the roof edge and the ground at its foot through their smoothly turning normals.
 constexpr double kWeakCue = 0.25;
 
-size_t propagateOrientation(const GridKnn& grid, const double* src, size_t n, int k, const NormalOrientation& orient,
-                            const std::vector<uint8_t>& keep, float* nrm) {
-  std::vector<int32_t> slot(n, -1);  // index into weak, or -1
-  std::vector<uint32_t> weak;
-  for (size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3f nn(&nrm[3 * i]);
-    if (!keep[i] || nn.squaredNorm() == 0) continue;
-    const Eigen::Vector3d t = towardOf(orient, i, Eigen::Vector3d(&src[3 * i]));
-    const double tl = t.norm();
-    if (tl > 0 && std::abs(nn.cast<double>().dot(t)) >= kWeakCue * tl) continue;
-    slot[i] = int32_t(weak.size());
-    weak.push_back(uint32_t(i));
+// Whether the cue toward t barely decides the sign of normal n (a zero t decides nothing).
+bool weakCue(const float* n, const Eigen::Vector3d& t) {
+  const double tl = t.norm();
+  return !(tl > 0 && std::abs(Eigen::Vector3f(n[0], n[1], n[2]).cast<double>().dot(t)) >= kWeakCue * tl);
+}
+
+// The neighbour lists of the points the cue left undecided, gathered during the fit's own
+// k-nearest-neighbour pass (no second search): per point its index, then k neighbours (-1 pads).
+struct WeakLists {
+  int k = 0;
+  tbb::enumerable_thread_specific<std::vector<int>> perThread;
+  void add(size_t i, const int* ind, int m) {
+    std::vector<int>& v = perThread.local();
+    v.push_back(int(i));
+    v.insert(v.end(), ind, ind + m);
+    v.insert(v.end(), size_t(k - m), -1);
   }
+  // Every record as (point, its list), ordered by point (threads append in any order).
+  std::vector<std::pair<uint32_t, const int*>> sorted() const {
+    std::vector<std::pair<uint32_t, const int*>> recs;
+    for (const std::vector<int>& v : perThread)
+      for (size_t r = 0; r < v.size(); r += size_t(k) + 1) recs.emplace_back(uint32_t(v[r]), &v[r + 1]);
+    std::sort(recs.begin(), recs.end());
+    return recs;
+  }
+};
+
+// A chunk's points in the grid's order over the caller's arrays: point i of the order is
+// orig[i] there (the normals and flags are not copied: at millions of points that is memory).
+struct OrderedPoints {
+  const double* src;  // positions, in the grid's order
+  const uint32_t* orig;
+  float* nrm;     // the caller's normals
+  uint8_t* keep;  // the caller's flags
+  float* normal(size_t i) const { return nrm + 3 * size_t(orig[i]); }
+  bool kept(size_t i) const { return keep[orig[i]] != 0; }
+};
+
+size_t propagateOrientation(const WeakLists& weakLists, size_t n, const OrderedPoints& pts) {
+  const int k = weakLists.k;
+  const std::vector<std::pair<uint32_t, const int*>> weak = weakLists.sorted();
   if (weak.empty()) return 0;
-  std::vector<int> lists(weak.size() * size_t(k), -1);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, weak.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-    std::vector<int> ind;
-    std::vector<double> d2;
-    for (size_t a = r.begin(); a != r.end(); ++a) {
-      grid.query(weak[a], k, ind, d2);
-      std::copy(ind.begin(), ind.end(), lists.begin() + long(a * size_t(k)));
-    }
-  });
+  std::vector<int32_t> slot(n, -1);  // index into weak, or -1
+  for (size_t a = 0; a < weak.size(); ++a) slot[weak[a].first] = int32_t(a);
   // 0: undecided; 1: decided (by the cue or by neighbours).
   std::vector<uint8_t> decided(weak.size(), 0);
   auto vote = [&](size_t a) {
-    const uint32_t i = weak[a];
-    const Eigen::Vector3f ni(&nrm[3 * size_t(i)]);
+    const uint32_t i = weak[a].first;
+    const Eigen::Vector3f ni(pts.normal(i));
     double sum = 0;
     for (int j = 0; j < k; ++j) {
-      const int q = lists[a * size_t(k) + size_t(j)];
-      if (q < 0 || uint32_t(q) == i || !keep[size_t(q)]) continue;
+      const int q = weak[a].second[j];
+      if (q < 0 || uint32_t(q) == i || !pts.kept(size_t(q))) continue;
       if (slot[size_t(q)] >= 0 && !decided[size_t(slot[size_t(q)])]) continue;
-      sum += ni.dot(Eigen::Vector3f(&nrm[3 * size_t(q)]));
+      sum += ni.dot(Eigen::Vector3f(pts.normal(size_t(q))));
     }
     return sum;
   };
@@ -163,7 +193,8 @@ size_t propagateOrientation(const GridKnn& grid, const double* src, size_t n, in
   std::vector<size_t> queue;
   auto decide = [&](size_t a, double v) {
     if (v < 0) {
-      for (int c = 0; c < 3; ++c) nrm[3 * size_t(weak[a]) + c] = -nrm[3 * size_t(weak[a]) + c];
+      float* nn = pts.normal(weak[a].first);
+      for (int c = 0; c < 3; ++c) nn[c] = -nn[c];
       ++flipped;
     }
     decided[a] = 1;
@@ -178,7 +209,7 @@ size_t propagateOrientation(const GridKnn& grid, const double* src, size_t n, in
   for (size_t head = 0; head < queue.size(); ++head) {
     const size_t a = queue[head];
     for (int j = 0; j < k; ++j) {
-      const int q = lists[a * size_t(k) + size_t(j)];
+      const int q = weak[a].second[j];
       if (q < 0 || slot[size_t(q)] < 0 || decided[size_t(slot[size_t(q)])]) continue;
       const size_t b = size_t(slot[size_t(q)]);
       const double v = vote(b);
@@ -188,17 +219,10 @@ size_t propagateOrientation(const GridKnn& grid, const double* src, size_t n, in
   return flipped;
 }
 
-}  // namespace
-
-size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
-                  std::vector<uint8_t>& keep, float* localSpacing) {
-  keep.assign(n, 1);
-  if (n == 0) return 0;
-  const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
-  // The grid indexes a copy: smoothed positions are written back only when every point is done.
-  std::vector<double> src(pos, pos + 3 * n);
-  const Spacing sp = estimateSpacing(src.data(), n);
-  const GridKnn grid(src.data(), n, GridKnn::cellFor(sp.area > 0 ? sp.area : sp.nearest, k));
+// The fit over points in the grid's order; pos and localSpacing are the caller's (by orig).
+size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k, const NormalOrientation& orient,
+                  const SurfaceOptions& opt, double* pos, float* localSpacing) {
+  const double* src = pts.src;
   // Progress: 2n units, the density pass n of them (when there is one).
   std::atomic<size_t> units{0};
   auto tick = [&](size_t u) {  // reports in steps of 4096 units
@@ -217,12 +241,15 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
     });
   }
   const size_t perFit = density.empty() ? 2 : 1;
+  WeakLists weak;
+  weak.k = k;
   grid.forEach(k, [&](size_t i, const int* in, const double* dist, int m) {
     tick(perFit);
     const Eigen::Vector3d p(&src[3 * i]);
+    const size_t o = pts.orig[i];
     if (localSpacing) {
       const int j = std::min(m - 1, kDensityNeighbours);  // [0] is the point itself
-      localSpacing[i] = float(std::sqrt(dist[j] * M_PI / std::max(j, 1)));
+      localSpacing[o] = float(std::sqrt(dist[j] * M_PI / std::max(j, 1)));
     }
     if (!density.empty()) {
       // Outlier: much farther from its neighbours than they are from theirs (a local test,
@@ -233,13 +260,13 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
       if (c > 0) {
         std::nth_element(around.begin(), around.begin() + long(c / 2), around.begin() + long(c));
         if (density[i] > opt.outlierRatio * around[c / 2]) {
-          keep[i] = 0;
+          pts.keep[o] = 0;
           return;
         }
       }
     }
-    const LocalSurface ls = fitLocal(src.data(), p, in, dist, m);
-    float* out = &nrm[3 * i];
+    const LocalSurface ls = fitLocal(src, p, in, dist, m);
+    float* out = pts.normal(i);
     const Eigen::Vector3d given(out[0], out[1], out[2]);
     if (!ls.ok) {
       if (opt.estimateNormals) out[0] = out[1] = out[2] = 0.f;  // unknown
@@ -249,15 +276,40 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
     // (layers, vegetation and sharp features keep their points where they are).
     const double move = (ls.projected - p).norm();
     if (opt.smooth && ls.residual < 0.25 * ls.radius && move < 0.5 * ls.radius)
-      for (int c = 0; c < 3; ++c) pos[3 * i + c] = ls.projected[c];
+      for (int c = 0; c < 3; ++c) pos[3 * o + c] = ls.projected[c];
     Eigen::Vector3d nn = ls.normal;
-    const Eigen::Vector3d toward = given.squaredNorm() > 0.25 && !opt.estimateNormals ? given : towardOf(orient, i, p);
+    const Eigen::Vector3d toward = given.squaredNorm() > 0.25 && !opt.estimateNormals ? given : towardOf(orient, o, p);
     if (nn.dot(toward) < 0) nn = -nn;
     if (opt.estimateNormals || opt.smooth)
       for (int c = 0; c < 3; ++c) out[c] = float(nn[c]);
+    if (opt.estimateNormals && weakCue(out, toward)) weak.add(i, in, m);
   });
-  if (opt.estimateNormals) propagateOrientation(grid, src.data(), n, k, orient, keep, nrm);
-  return size_t(std::count(keep.begin(), keep.end(), 0));
+  if (opt.estimateNormals) propagateOrientation(weak, n, pts);
+  return size_t(std::count(pts.keep, pts.keep + n, 0));
+}
+
+}  // namespace
+
+size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
+                  std::vector<uint8_t>& keep, float* localSpacing) {
+  keep.assign(n, 1);
+  if (n == 0) return 0;
+  const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
+  const Spacing sp = estimateSpacing(pos, n);
+  const double cell = GridKnn::cellFor(sp.area > 0 ? sp.area : sp.nearest, k);
+  // Every pass visits the points in the grid's spatial order, reading a copy of the positions
+  // in that order (smoothed positions go to pos, which no pass reads): in a file's order a
+  // point's neighbours lie all over the chunk's arrays, and at millions of points the fit
+  // mostly waited for memory.
+  const std::vector<uint32_t> orig = GridKnn(pos, n, cell).order();
+  std::vector<double> src(3 * n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i)
+      for (int c = 0; c < 3; ++c) src[3 * i + c] = pos[3 * size_t(orig[i]) + c];
+  });
+  const GridKnn grid(src.data(), n, cell);
+  const size_t removed = fitOrdered(grid, {src.data(), orig.data(), nrm, keep.data()}, n, k, orient, opt, pos, localSpacing);
+  return removed;
 }
 
 void estimateNormals(const double* pos, size_t n, int k, const NormalOrientation& orient, float* nrm) {

@@ -2,7 +2,10 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace sa {
@@ -99,23 +102,37 @@ uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, cons
   return layered;
 }
 
-void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
-                 const Eigen::Vector3d& rootMin, double rootSize, int rootLevel, const OctreeParams& params,
-                 std::vector<OctreeCell>& out, const float* cone) {
-  const double cosMax = std::cos(params.maxAngleDeg * M_PI / 180.0);
-  const double outliers = params.outlierFraction < 0 ? kPointOutlierFraction : params.outlierFraction;
-  const uint32_t minSplit = params.minSplitPoints ? params.minSplitPoints : kPointMinSplit;
-  struct Item { uint32_t first, count; int level; Eigen::Vector3d min; double size; };
-  std::vector<Item> stack{{0, static_cast<uint32_t>(idx.size()), rootLevel, rootMin, rootSize}};
-  while (!stack.empty()) {
-    Item it = stack.back();
-    stack.pop_back();
-    if (it.count == 0) continue;
-    PlaneFit fit = fitPlane(pos, nrm, idx.data() + it.first, it.count, cosMax, outliers, cone);
+namespace {
+
+struct OctreeBuild {
+  const double* pos;
+  const float* nrm;
+  const float* cone;
+  uint32_t* idx;
+  const OctreeParams& params;
+  double cosMax, outliers;
+  uint32_t minSplit;
+
+  struct Item {
+    uint32_t first, count;
+    int level;
+    Eigen::Vector3d min;
+    double size;
+  };
+
+  // Subtrees of fewer points are built on the calling thread.
+  static constexpr uint32_t kParallelPoints = 1u << 15;
+
+  // The cells of one node's subtree, in the order a depth-first walk that visits the children
+  // last to first emits them (the order of the serial build before it ran on every core).
+  std::vector<OctreeCell> build(const Item& it) const {
+    std::vector<OctreeCell> out;
+    if (it.count == 0) return out;
+    PlaneFit fit = fitPlane(pos, nrm, idx + it.first, it.count, cosMax, outliers, cone);
     const bool canSplit = it.level < params.maxDepth && it.count >= minSplit;
     if (fit.heightField &&
-        countLayeredBins(pos, idx.data() + it.first, it.count, fit, params.layerBin, params.layerGap,
-                         params.layeredBins) >= params.layeredBins) {
+        countLayeredBins(pos, idx + it.first, it.count, fit, params.layerBin, params.layerGap, params.layeredBins) >=
+            params.layeredBins) {
       fit.heightField = false;
       fit.layered = true;
     }
@@ -129,13 +146,26 @@ void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx
       c.cubeMin = it.min;
       c.cubeSize = it.size;
       out.push_back(c);
-      continue;
+      return out;
     }
-    // Partition into the 8 children by the cube centre: x, then y, then z.
+    std::array<Item, 8> ch = split(it);
+    std::array<std::vector<OctreeCell>, 8> sub;
+    if (it.count >= kParallelPoints) {
+      tbb::parallel_for(0, 8, [&](int c) { sub[size_t(c)] = build(ch[size_t(c)]); });
+    } else {
+      for (int c = 0; c < 8; ++c) sub[size_t(c)] = build(ch[size_t(c)]);
+    }
+    for (int c = 7; c >= 0; --c) out.insert(out.end(), sub[size_t(c)].begin(), sub[size_t(c)].end());
+    return out;
+  }
+
+  // Partitions the node's points into its 8 children by the cube centre: x, then y, then z.
+  std::array<Item, 8> split(const Item& it) const {
     const Eigen::Vector3d mid = it.min + Eigen::Vector3d::Constant(it.size / 2);
-    uint32_t* b = idx.data() + it.first;
+    uint32_t* b = idx + it.first;
     uint32_t* e = b + it.count;
-    auto side = [&](int axis) { return [=](uint32_t i) { return pos[3 * size_t(i) + axis] < mid[axis]; }; };
+    const double* p = pos;
+    auto side = [p, &mid](int axis) { return [=](uint32_t i) { return p[3 * size_t(i) + axis] < mid[axis]; }; };
     uint32_t* xs = std::partition(b, e, side(0));
     uint32_t* ranges[9];
     uint32_t* ys[2] = {std::partition(b, xs, side(1)), std::partition(xs, e, side(1))};
@@ -149,17 +179,31 @@ void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx
     ranges[5] = std::partition(ranges[4], ranges[6], side(2));
     ranges[7] = std::partition(ranges[6], ranges[8], side(2));
     const double h = it.size / 2;
+    std::array<Item, 8> ch;
     for (int c = 0; c < 8; ++c) {
       const int cx = c >> 2, cy = (c >> 1) & 1, cz = c & 1;
-      Item ch;
-      ch.first = static_cast<uint32_t>(ranges[c] - idx.data());
-      ch.count = static_cast<uint32_t>(ranges[c + 1] - ranges[c]);
-      ch.level = it.level + 1;
-      ch.min = it.min + Eigen::Vector3d(cx * h, cy * h, cz * h);
-      ch.size = h;
-      stack.push_back(ch);
+      ch[size_t(c)].first = static_cast<uint32_t>(ranges[c] - idx);
+      ch[size_t(c)].count = static_cast<uint32_t>(ranges[c + 1] - ranges[c]);
+      ch[size_t(c)].level = it.level + 1;
+      ch[size_t(c)].min = it.min + Eigen::Vector3d(cx * h, cy * h, cz * h);
+      ch[size_t(c)].size = h;
     }
+    return ch;
   }
+};
+
+}  // namespace
+
+// Children's subtrees are disjoint ranges of idx: they are built concurrently, and their cells
+// concatenated in a fixed order, so the result does not depend on scheduling.
+void buildOctree(const double* pos, const float* nrm, std::vector<uint32_t>& idx,
+                 const Eigen::Vector3d& rootMin, double rootSize, int rootLevel, const OctreeParams& params,
+                 std::vector<OctreeCell>& out, const float* cone) {
+  const OctreeBuild b{pos, nrm, cone, idx.data(), params, std::cos(params.maxAngleDeg * M_PI / 180.0),
+                      params.outlierFraction < 0 ? kPointOutlierFraction : params.outlierFraction,
+                      params.minSplitPoints ? params.minSplitPoints : kPointMinSplit};
+  std::vector<OctreeCell> cells = b.build({0, static_cast<uint32_t>(idx.size()), rootLevel, rootMin, rootSize});
+  out.insert(out.end(), cells.begin(), cells.end());
 }
 
 }  // namespace sa
