@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <thread>
 
 #include "cli/args.h"
 #include "cli/commands.h"
@@ -227,6 +228,7 @@ int cmdPack(int argc, char** argv) {
   for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
     if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
+  auto busy = [&](int phase) { return sum.seconds[phase] > 0 ? sum.cpuSeconds[phase] / sum.seconds[phase] : 0.0; };
   if (sum.upToDate && !quiet && !a.flag("json"))
     std::fprintf(stderr, "%s is up to date (same points, files and options, hash %016llx, checked in %.2fs); --force repacks\n",
                  out.c_str(), (unsigned long long)sum.inputHash, sum.seconds[5]);
@@ -249,15 +251,20 @@ int cmdPack(int argc, char** argv) {
                 sum.hasColor ? "true" : "false");
     for (size_t i = 0; i < sum.cellsPerLevel.size(); ++i) std::printf("%s%u", i ? ", " : "", sum.cellsPerLevel[i]);
     std::printf("], \"seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
-                "\"write\": %.3f, \"total\": %.3f}, \"mpts_per_s\": %.3f}\n",
-                sum.seconds[0], sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], sum.seconds[5], mpts);
+                "\"write\": %.3f, \"total\": %.3f}, ",
+                sum.seconds[0], sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], sum.seconds[5]);
+    std::printf("\"cpu_seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
+                "\"write\": %.3f, \"total\": %.3f}, \"cores\": %u, \"mpts_per_s\": %.3f}\n",
+                sum.cpuSeconds[0], sum.cpuSeconds[1], sum.cpuSeconds[2], sum.cpuSeconds[3], sum.cpuSeconds[4],
+                sum.cpuSeconds[5], std::max(1u, std::thread::hardware_concurrency()), mpts);
   } else if (!quiet && !sum.upToDate) {
     std::fprintf(stderr,
                  "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
                  "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
                  "  up %.3g,%.3g,%.3g (%s)\n"
                  "  file %.1f MiB (%.1f bytes/point), temporary chunk files %.1f MiB written\n"
-                 "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n",
+                 "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n"
+                 "  cores busy %.2f of %u (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f)\n",
                  out.c_str(), (unsigned long long)sum.pointsRead,
                  sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
                  sum.outliersRemoved ? (" (" + std::to_string(sum.outliersRemoved) + " outliers removed)").c_str() : "",
@@ -268,7 +275,8 @@ int cmdPack(int argc, char** argv) {
                  upSourceName(sum.upSource), sum.fileBytes / 1048576.0,
                  double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.scratchBytes / 1048576.0,
                  sum.seconds[5], sum.seconds[0],
-                 sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts);
+                 sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts, busy(5),
+                 std::max(1u, std::thread::hardware_concurrency()), busy(0), busy(1), busy(2), busy(3), busy(4));
   }
   return 0;
 }

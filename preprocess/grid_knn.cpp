@@ -29,16 +29,6 @@ uint64_t spread(uint64_t v) {  // 21 bits -> every third bit of 63
   return v;
 }
 
-// Per-thread buffers of nearest() (it runs for every point: no allocation per call).
-std::vector<double>& scratchD2() {
-  thread_local std::vector<double> v;
-  return v;
-}
-std::vector<double>& scratchSel() {
-  thread_local std::vector<double> v;
-  return v;
-}
-
 uint64_t compact(uint64_t v) {  // the inverse of spread
   v &= 0x1249249249249249ull;
   v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ull;
@@ -139,22 +129,29 @@ void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
 // The k smallest (d2, index) of point i over `cand` into scratch (ascending), then, where the
 // candidates cannot prove it (the k-th lies beyond the gathered block), wider rings and at last
 // every cell, pruned by distance.
-void GridKnn::nearest(size_t i, const Candidates& cand, int k,
-                      std::vector<std::pair<double, uint32_t>>& best) const {
+void GridKnn::nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
+                      double bound2) const {
   const double* p = pos_ + 3 * i;
-  auto collect = [&](const Candidates& from) {
-    best.resize(from.index.size());
+  // The k smallest of the candidates within bound2 if there are k of them (every candidate
+  // left out is then farther than all kept), else of all: the selection is most of a query's
+  // cost, and a good bound leaves it half the candidates.
+  auto collect = [&](const Candidates& from, double b2) {
+    const size_t nc = from.index.size(), m = std::min(nc, size_t(k));
+    best.clear();
     const double* q = from.xyz.data();
-    for (size_t j = 0; j < best.size(); ++j, q += 3) {
+    for (size_t j = 0; j < nc; ++j, q += 3) {
       const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
-      best[j] = {dx * dx + dy * dy + dz * dz, from.index[j]};
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      if (d2 <= b2) best.emplace_back(d2, from.index[j]);
     }
-    const size_t m = std::min(best.size(), size_t(k));
+    if (best.size() < m) return false;
     if (m < best.size()) std::nth_element(best.begin(), best.begin() + long(m - 1), best.end());
     best.resize(m);
     std::sort(best.begin(), best.end());
+    return true;
   };
-  collect(cand);
+  const double all = std::numeric_limits<double>::infinity();
+  if (!collect(cand, bound2)) collect(cand, all);
   int64_t c[3];
   coords(i, c);
   const size_t want = std::min(n_, size_t(k));
@@ -172,7 +169,7 @@ void GridKnn::nearest(size_t i, const Candidates& cand, int k,
   Candidates more;
   for (int ring = 2; ring <= kMaxRing; ++ring) {
     gather(c, ring, more);
-    collect(more);
+    collect(more, all);
     if (proven(ring)) return;
   }
   // Far from everything (an outlier, a sparse fringe): every cell that can hold a closer point.
@@ -215,9 +212,21 @@ void GridKnn::forEach(int k, const Visit& fn) const {
       int64_t c[3];
       coords(order_[cc.begin], c);
       gather(c, 1, cand);
+      // Each point's bound: the previous point's k-th distance plus the distance between them
+      // (the previous point's k neighbours are all that close).
+      double prevR = -1;
+      const double* prev = nullptr;
       for (uint32_t o = cc.begin; o < cc.end; ++o) {
         const size_t i = order_[o];
-        nearest(i, cand, k, best);
+        const double* p = pos_ + 3 * i;
+        double bound2 = std::numeric_limits<double>::infinity();
+        if (prevR >= 0) {
+          const double dx = p[0] - prev[0], dy = p[1] - prev[1], dz = p[2] - prev[2];
+          const double r = prevR + std::sqrt(dx * dx + dy * dy + dz * dz);
+          bound2 = r * r * (1 + 1e-9);
+        }
+        nearest(i, cand, k, best, bound2);
+        if (best.size() == size_t(k)) prevR = std::sqrt(best.back().first), prev = p;
         for (size_t j = 0; j < best.size(); ++j) ind[j] = int(best[j].second), d2[j] = best[j].first;
         fn(i, ind.data(), d2.data(), int(best.size()));
       }

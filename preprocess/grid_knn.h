@@ -12,6 +12,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <vector>
 
 namespace sa {
@@ -61,7 +62,11 @@ class GridKnn {
   void forCells(const int64_t a[3], const int64_t b[3], F visit) const;
   // Candidates in the cube of cells within `ring` of cell c (ring 1: 3x3x3).
   void gather(const int64_t c[3], int ring, Candidates& out) const;
-  void nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best) const;
+  // bound2: a guess at the k-th squared distance (a neighbour's k-th distance plus the distance
+  // to it); candidates beyond it are skipped unless that leaves fewer than k. Any value gives the
+  // exact answer; a good one only makes it faster.
+  void nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
+               double bound2 = std::numeric_limits<double>::infinity()) const;
 
   const double* pos_;
   size_t n_;

@@ -1,6 +1,7 @@
 #include "preprocess/pipeline.h"
 
 #include <xxhash.h>
+#include <sys/resource.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -31,6 +32,24 @@ using Clock = std::chrono::steady_clock;
 
 
 double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+// User + system seconds of every thread of this process so far.
+double processCpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+// A phase's wall and CPU seconds (PackSummary::seconds, cpuSeconds; their ratio is the cores
+// it kept busy).
+struct PhaseTimer {
+  Clock::time_point wall = Clock::now();
+  double cpu = processCpuSeconds();
+  void stop(PackSummary& s, int phase) const {
+    s.seconds[phase] = secondsSince(wall);
+    s.cpuSeconds[phase] = processCpuSeconds() - cpu;
+  }
+};
 
 Eigen::Vector3d vec(const double* d) { return Eigen::Vector3d(d[0], d[1], d[2]); }
 
@@ -148,7 +167,7 @@ Eigen::Vector3d sheetSide(const Eigen::Matrix3d& covariance, const InputSet& inp
 }
 
 Status boundsPhase(PackJob& job) {
-  const auto t0 = Clock::now();
+  const PhaseTimer timer;
   SA_RETURN_IF_ERROR(computeBounds(job.input, job.bounds, job.progress, job.opt.strict, true));
   job.sum.pointsRead = job.bounds.count;
   job.sum.pointsSkipped = job.bounds.skipped;
@@ -161,13 +180,13 @@ Status boundsPhase(PackJob& job) {
   const Eigen::Vector3d ext = job.bounds.max - job.bounds.min;
   job.qz.cubeSize = std::max(ext.maxCoeff() * 1.0001, std::max(1e-12, 1e-12 * job.origin.cwiseAbs().maxCoeff()));
   job.qz.cubeMin = Eigen::Vector3d::Constant(-job.qz.cubeSize / 2);
-  job.sum.seconds[0] = secondsSince(t0);
+  timer.stop(job.sum, 0);
   return Status::ok();
 }
 
 // ---- pass 2: distribute into chunks ----
 Status distributePhase(PackJob& job, const std::string& outPath) {
-  const auto t0 = Clock::now();
+  const PhaseTimer timer;
   // Leftovers of a killed pack (chunk directories, a partial output) are removed, not reused.
   const std::string scratchParent = job.opt.scratchParent.empty() ? directoryOf(outPath) : job.opt.scratchParent;
   removeStaleTemporaries(scratchParent, ".scanatlas-chunks-");
@@ -182,7 +201,7 @@ Status distributePhase(PackJob& job, const std::string& outPath) {
   job.sum.triangles = job.dist.triangles;
   job.sum.surfaceSamples = job.dist.surfaceSamples;
   job.sum.chunks = static_cast<uint32_t>(job.dist.chunks.size());
-  job.sum.seconds[1] = secondsSince(t0);
+  timer.stop(job.sum, 1);
   if (job.triangles && job.dist.triangles == 0)
     return Status::badInput(job.input.files()[0].path + ": face element holds no triangles; use --as-points");
   if (job.triangles)
@@ -354,7 +373,7 @@ Status chunkCells(PackJob& job, uint32_t ci, uint64_t before) {
 }
 
 Status cellsPhase(PackJob& job) {
-  const auto t0 = Clock::now();
+  const PhaseTimer timer;
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
   job.chunkSpacing.assign(job.dist.chunks.size(), 0.0);
   uint64_t processed = 0;
@@ -368,7 +387,7 @@ Status cellsPhase(PackJob& job) {
   }
   std::sort(job.sampleCells.begin(), job.sampleCells.end());
   job.sampleCells.erase(std::unique(job.sampleCells.begin(), job.sampleCells.end()), job.sampleCells.end());
-  job.sum.seconds[2] = secondsSince(t0);
+  timer.stop(job.sum, 2);
   job.sum.spacing = job.spacingWeight ? job.spacingSum / double(job.spacingWeight) : job.qz.cubeSize * 1e-3;
   if (!(job.sum.spacing > 0)) job.sum.spacing = job.qz.cubeSize * 1e-3;
   job.sum.areaSpacing = job.spacingWeight ? job.areaSpacingSum / double(job.spacingWeight) : job.sum.spacing;
@@ -829,7 +848,8 @@ static uint64_t combineHash(uint64_t setup, uint64_t content) {
 
 Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& opt,
                  const ProgressFn& progress, PackSummary& sum) {
-  const auto tStart = Clock::now();
+  const PhaseTimer whole;
+  const auto tStart = whole.wall;
   sum = PackSummary{};
   sum.warnings = input.warnings();
   auto setup = hashSetup(input, opt);
@@ -857,22 +877,22 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   SA_RETURN_IF_ERROR(distributePhase(job, outPath));
   SA_RETURN_IF_ERROR(cellsPhase(job));
   upPhase(job);
-  const auto t0 = Clock::now();
+  const PhaseTimer heightmaps;
   if (job.triangles) SA_RETURN_IF_ERROR(assignPhase(job));
   layoutPhase(job);
   job.meta = makeMeta(job);
   PackWriter writer;
   SA_RETURN_IF_ERROR(writer.open(outPath, job.meta, job.records, makeNote(job)));
   SA_RETURN_IF_ERROR(tilesPhase(job, writer));
-  sum.seconds[3] = secondsSince(t0);  // layout included
-  const auto tw = Clock::now();
+  heightmaps.stop(sum, 3);  // layout included
+  const PhaseTimer write;
   if (progress) progress("write", 0, 1);
   for (int i = 0; i < 4; ++i) job.meta.seconds[i] = sum.seconds[i];
   job.meta.seconds[5] = secondsSince(tStart);
   writer.setMeta(job.meta);
   SA_RETURN_IF_ERROR(writer.finish());
-  sum.seconds[4] = secondsSince(tw);
-  sum.seconds[5] = secondsSince(tStart);
+  write.stop(sum, 4);
+  whole.stop(sum, 5);
   sum.scratchBytes = chunkBytesWritten() - scratch0;
   sum.scratchRawBytes = chunkRecordBytesWritten() - raw0;
   if (progress) progress("write", 1, 1);

@@ -41,7 +41,8 @@ struct PackSummary {
   uint64_t scratchBytes = 0;     // written to temporary chunk files (compressed)
   uint64_t scratchRawBytes = 0;  // the same records uncompressed
   double spacing = 0, areaSpacing = 0, texelSize = 0;
-  double seconds[6] = {0, 0, 0, 0, 0, 0};
+  double seconds[6] = {0, 0, 0, 0, 0, 0};     // count, distribute, normals+octree, heightmaps, write, total
+  double cpuSeconds[6] = {0, 0, 0, 0, 0, 0};  // the same phases' user + system seconds over all threads
   std::vector<uint32_t> cellsPerLevel;
   bool normalsEstimated = false, fromTriangles = false, hasColor = false;
   Eigen::Vector3d up = Eigen::Vector3d::Zero();

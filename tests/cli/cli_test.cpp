@@ -104,6 +104,17 @@ TEST(Cli, PackInfoBenchEvalJson) {
   EXPECT_EQ(pj["triangles"].get<int>(), 5120);
   EXPECT_TRUE(pj["from_triangles"].get<bool>());
   EXPECT_FALSE(pj["up_to_date"].get<bool>());
+  // Per-phase CPU seconds beside the wall seconds: a phase keeps at most every core busy, and
+  // the whole run's CPU time holds every phase's.
+  const double cores = pj["cores"].get<double>();
+  double phases = 0;
+  for (const char* ph : {"count", "distribute", "octree", "heightmaps", "write"}) {
+    const double cpu = pj["cpu_seconds"][ph].get<double>(), wall = pj["seconds"][ph].get<double>();
+    EXPECT_GE(cpu, 0) << ph;
+    EXPECT_LE(cpu, wall * cores + 0.02) << ph;  // getrusage ticks: a few ms
+    phases += cpu;
+  }
+  EXPECT_GE(pj["cpu_seconds"]["total"].get<double>() + 0.02, phases);
   EXPECT_TRUE(nlohmann::json::parse(run("pack " + d.file("ico.ply") + " -o " + d.file("ico.hfa") + " --json").out)["up_to_date"].get<bool>());
   auto info = nlohmann::json::parse(run("info " + d.file("ico.hfa") + " --json").out);
   EXPECT_EQ(info["cells"].get<int>(), pj["cells"].get<int>());
