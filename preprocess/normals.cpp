@@ -141,9 +141,18 @@ bool weakCue(const float* n, const Eigen::Vector3d& t) {
 // k-nearest-neighbour pass (no second search): per point its index, then k neighbours (-1 pads).
 struct WeakLists {
   int k = 0;
-  tbb::enumerable_thread_specific<std::vector<int>> perThread;
+  // Per thread, blocks of records filled in turn (no vector doubling: at millions of wall
+  // points a doubling vector would briefly hold three times the lists).
+  static constexpr size_t kBlockInts = 1 << 16;
+  tbb::enumerable_thread_specific<std::vector<std::vector<int>>> perThread;
   void add(size_t i, const int* ind, int m) {
-    std::vector<int>& v = perThread.local();
+    std::vector<std::vector<int>>& blocks = perThread.local();
+    const size_t rec = size_t(k) + 1;
+    if (blocks.empty() || blocks.back().size() + rec > blocks.back().capacity()) {
+      blocks.emplace_back();
+      blocks.back().reserve(std::max(kBlockInts, rec));
+    }
+    std::vector<int>& v = blocks.back();
     v.push_back(int(i));
     v.insert(v.end(), ind, ind + m);
     v.insert(v.end(), size_t(k - m), -1);
@@ -151,8 +160,9 @@ struct WeakLists {
   // Every record as (point, its list), ordered by point (threads append in any order).
   std::vector<std::pair<uint32_t, const int*>> sorted() const {
     std::vector<std::pair<uint32_t, const int*>> recs;
-    for (const std::vector<int>& v : perThread)
-      for (size_t r = 0; r < v.size(); r += size_t(k) + 1) recs.emplace_back(uint32_t(v[r]), &v[r + 1]);
+    for (const std::vector<std::vector<int>>& blocks : perThread)
+      for (const std::vector<int>& v : blocks)
+        for (size_t r = 0; r < v.size(); r += size_t(k) + 1) recs.emplace_back(uint32_t(v[r]), &v[r + 1]);
     std::sort(recs.begin(), recs.end());
     return recs;
   }
