@@ -53,8 +53,7 @@ SectionEntry makeSection(const char* id, uint64_t off, uint64_t size, uint32_t c
 
 }  // namespace
 
-Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
-                        const std::string& note) {
+void PackWriter::layOut(const PackMeta& meta, std::vector<CellRecord> cells, const std::string& note) {
   meta_ = meta;
   meta_.cellCount = static_cast<uint32_t>(cells.size());
   cells_ = std::move(cells);
@@ -74,11 +73,22 @@ Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vect
   }
   noteOff_ = alignUp(end);
   fileSize_ = noteOff_ + note_.size();
+}
+
+Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
+                        const std::string& note) {
+  layOut(meta, std::move(cells), note);
   SA_RETURN_IF_ERROR(file_.open(path));
   // Sparse: untouched page texels read as 0 (= not covered).
   if (ftruncate(file_.fd(), static_cast<off_t>(fileSize_)) != 0)
     return Status::internal(file_.tempPath() + ": cannot size output file: " + std::strerror(errno));
   return Status::ok();
+}
+
+Status PackWriter::join(const std::string& tempPath, const PackMeta& meta, std::vector<CellRecord> cells,
+                        const std::string& note) {
+  layOut(meta, std::move(cells), note);
+  return file_.join(tempPath);
 }
 
 Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba) {

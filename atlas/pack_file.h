@@ -21,6 +21,11 @@ class PackWriter {
   // `cells` must already carry their tile placements; `meta` the page size and count.
   Status open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
               const std::string& note);
+  // Writes tiles into the temporary another process opened with the same meta, cells and note
+  // (a cluster pack's other ranks); leave() instead of finish().
+  Status join(const std::string& tempPath, const PackMeta& meta, std::vector<CellRecord> cells,
+              const std::string& note);
+  Status leave() { return file_.leave(); }
   // Writes one tile (tileW x tileH, row-major) and its gutter: heights, encoded normals
   // (kNormalBytes per texel; may be null when the pack has no normal pages) and colours (4 bytes; may be null
   // when the pack has no colour). Thread-safe for different cells.
@@ -40,8 +45,10 @@ class PackWriter {
   // Computes checksums, writes header, META and CELL, fsyncs and renames into place.
   Status finish();
   const std::string& tempPath() const { return file_.tempPath(); }
+  const CellRecord& cell(uint32_t i) const { return cells_[i]; }
 
  private:
+  void layOut(const PackMeta& meta, std::vector<CellRecord> cells, const std::string& note);
   AtomicFile file_;
   PackMeta meta_{};
   std::vector<CellRecord> cells_;

@@ -256,7 +256,8 @@ int cmdInfo(int argc, char** argv) {
     std::printf("detail    full: the texel is the data's (%.4g = half the sample's area spacing, or --texel-size)\n", tn.wanted);
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
   std::printf("timings  ");
-  for (int i = 0; i < 6; ++i)
+  if (m.seconds[5] == 0) std::printf(" not recorded (packed with --reproducible)");
+  for (int i = 0; i < 6 && m.seconds[5] != 0; ++i)
     if (i != 4) std::printf(" %s %.2fs", phases[i], m.seconds[i]);
   std::printf("\n");
   for (const ModeInfo& mi : allModes()) {

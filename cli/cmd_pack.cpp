@@ -13,6 +13,7 @@
 #include "cli/view_setup.h"
 #include "common/fileio.h"
 #include "modes/registry.h"
+#include "preprocess/cluster.h"
 #include "preprocess/pipeline.h"
 
 namespace sa {
@@ -28,6 +29,12 @@ const char* kHelp =
     "OBJ/OFF/STL meshes and text clouds (.xyz, .pts, .csv, .txt). Memory stays within\n"
     "--mem-budget whatever the input size (points go through on-disk chunks), except that PCD\n"
     "binary_compressed and Draco files are decoded whole and meshes are held in memory.\n"
+    "\n"
+    "On a cluster: mpirun -np N scanatlas pack ... (or srun --mpi=pmix under Slurm) splits the\n"
+    "chunks' normals, octree and height maps over N ranks; rank 0 reads, distributes and writes.\n"
+    "The inputs, the output's directory and --scratch must be on a filesystem every rank sees.\n"
+    "The pack is the one a single process makes, byte for byte with --reproducible. Ranks on one\n"
+    "machine share its cores.\n"
     "\n"
     "options:\n"
     "  -o, --output FILE      the pack to write (written atomically: FILE appears only when complete)\n"
@@ -74,6 +81,8 @@ const char* kHelp =
     "                         gdm (voxel surfels of the forced cells from the sources, and exact's);\n"
     "                         parallax and points need nothing. Later, with a region or a budget:\n"
     "                         scanatlas bake OUT.hfa --mode vdm --clip-box ... | --budget SIZE\n"
+    "  --reproducible         no timings in the pack: the same input and options give the same bytes\n"
+    "                         (timings stay in the summary)\n"
     "  --json                 print the summary as JSON on stdout\n"
     "  -q, --quiet            no progress and no summary\n";
 
@@ -105,134 +114,97 @@ const char* upSourceName(uint32_t s) {
 
 }  // namespace
 
-int cmdPack(int argc, char** argv) {
-  Args a;
-  Status s = a.parse(argc, argv,
-                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
-                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves"},
-                     {"as-points", "strict", "force", "no-smooth", "json", "quiet", "help"},
-                     {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
-  if (a.flag("help")) {
-    std::fputs(kHelp, stdout);
-    return 0;
-  }
-  if (!s) return reportError(s);
-  if (a.positionals().empty()) return reportError(Status::badInput("pack: no input files (see --help)"));
-  if (!a.has("output")) return reportError(Status::badInput("pack: -o OUT.hfa is required"));
-  PackOptions opt;
+// The options that shape the pack (not the output or the modes).
+static Status parsePackOptions(const Args& a, PackOptions& opt) {
   if (a.has("mem-budget")) {
     auto v = parseSize("mem-budget", a.get("mem-budget"));
-    if (!v) return reportError(v.status());
-    if (*v < (16u << 20)) return reportError(Status::badInput("--mem-budget: at least 16M is needed"));
+    if (!v) return v.status();
+    if (*v < (16u << 20)) return (Status::badInput("--mem-budget: at least 16M is needed"));
     opt.memBudget = *v;
   }
   if (a.has("texels")) {
     auto v = parseSize("texels", a.get("texels"));
-    if (!v) return reportError(v.status());
-    if (*v < 1024 || *v > (uint64_t(1) << 34)) return reportError(Status::badInput("--texels: must be between 1K and 16G"));
+    if (!v) return v.status();
+    if (*v < 1024 || *v > (uint64_t(1) << 34)) return (Status::badInput("--texels: must be between 1K and 16G"));
     opt.texelBudget = *v;
   }
   if (a.has("texel-size")) {
     auto v = parseNumber("texel-size", a.get("texel-size"));
-    if (!v) return reportError(v.status());
-    if (*v <= 0) return reportError(Status::badInput("--texel-size must be positive"));
+    if (!v) return v.status();
+    if (*v <= 0) return (Status::badInput("--texel-size must be positive"));
     opt.texelSize = *v;
   }
   if (a.has("max-depth")) {
     auto v = parseInt("max-depth", a.get("max-depth"), 0, 20);
-    if (!v) return reportError(v.status());
+    if (!v) return v.status();
     opt.octree.maxDepth = static_cast<int>(*v);
   }
   if (a.has("max-angle")) {
     auto v = parseNumber("max-angle", a.get("max-angle"));
-    if (!v) return reportError(v.status());
-    if (*v <= 0 || *v > 90) return reportError(Status::badInput("--max-angle must be in (0, 90]"));
+    if (!v) return v.status();
+    if (*v <= 0 || *v > 90) return (Status::badInput("--max-angle must be in (0, 90]"));
     opt.octree.maxAngleDeg = *v;
   }
   if (a.has("coverage")) {
     auto v = parseNumber("coverage", a.get("coverage"));
-    if (!v) return reportError(v.status());
-    if (*v <= 0 || *v > 100) return reportError(Status::badInput("--coverage must be in (0, 100]"));
+    if (!v) return v.status();
+    if (*v <= 0 || *v > 100) return (Status::badInput("--coverage must be in (0, 100]"));
     opt.coverageRadius = *v;
   }
   if (a.has("outliers")) {
     auto v = parseNumber("outliers", a.get("outliers"));
-    if (!v) return reportError(v.status());
-    if (*v < 0 || *v > 0.5) return reportError(Status::badInput("--outliers must be in [0, 0.5]"));
+    if (!v) return v.status();
+    if (*v < 0 || *v > 0.5) return (Status::badInput("--outliers must be in [0, 0.5]"));
     opt.octree.outlierFraction = *v;
   }
   if (a.has("min-split")) {
     auto v = parseInt("min-split", a.get("min-split"), 1, 1 << 30);
-    if (!v) return reportError(v.status());
+    if (!v) return v.status();
     opt.octree.minSplitPoints = static_cast<uint32_t>(*v);
   }
   if (a.has("neighbours")) {
     auto v = parseInt("neighbours", a.get("neighbours"), 3, 128);
-    if (!v) return reportError(v.status());
+    if (!v) return v.status();
     opt.normalNeighbours = static_cast<int>(*v);
   }
   if (a.has("splat")) {
     auto v = parseNumber("splat", a.get("splat"));
-    if (!v) return reportError(v.status());
-    if (*v < 0 || *v > 100) return reportError(Status::badInput("--splat must be in [0, 100]"));
+    if (!v) return v.status();
+    if (*v < 0 || *v > 100) return (Status::badInput("--splat must be in [0, 100]"));
     opt.splatRadius = *v;
   }
   if (a.has("outlier-ratio")) {
     auto v = parseNumber("outlier-ratio", a.get("outlier-ratio"));
-    if (!v) return reportError(v.status());
-    if (*v != 0 && *v < 1.5) return reportError(Status::badInput("--outlier-ratio must be 0 (off) or at least 1.5"));
+    if (!v) return v.status();
+    if (*v != 0 && *v < 1.5) return (Status::badInput("--outlier-ratio must be 0 (off) or at least 1.5"));
     opt.outlierRatio = *v;
   }
   if (a.has("up")) {
     auto v = parseVec3("up", a.get("up"));
-    if (!v) return reportError(v.status());
-    if (!(v->norm() > 0)) return reportError(Status::badInput("--up must not be zero"));
+    if (!v) return v.status();
+    if (!(v->norm() > 0)) return (Status::badInput("--up must not be zero"));
     opt.up = v->normalized();
-  }
-  std::vector<RenderMode> modes;
-  for (const std::string& m : splitList(a.get("modes"))) {
-    auto r = parseMode(m);
-    if (!r) return reportError(Status::badInput("--modes: " + r.status().message()));
-    modes.push_back(*r);
-  }
-  BakeRequest bake;
-  if (a.has("grooves")) {
-    bake.groovesFile = a.get("grooves");
-    if (!std::filesystem::is_regular_file(bake.groovesFile))
-      return reportError(Status::badInput("--grooves: " + bake.groovesFile + ": no such file"));
-    if (std::find(modes.begin(), modes.end(), RenderMode::kGrooves) == modes.end()) modes.push_back(RenderMode::kGrooves);
   }
   opt.smooth = !a.flag("no-smooth");
   opt.asPoints = a.flag("as-points");
   opt.strict = a.flag("strict");
   opt.force = a.flag("force");
+  opt.reproducible = a.flag("reproducible");
   opt.scratchParent = a.get("scratch");
-  for (int i = 0; i < argc; ++i) opt.commandLine += std::string(i ? " " : "") + argv[i];
-  const std::string out = a.get("output");
-  if (std::filesystem::is_directory(out)) return reportError(Status::badInput(out + ": is a directory; give a file name"));
+  return Status::ok();
+}
 
-  auto input = InputSet::open(a.positionals(), a.get("columns"));
-  if (!input) return reportError(input.status());
-  s = checkNotAnInput(out, input->allPaths(), "-o");
-  if (!s) return reportError(s);
-  const bool quiet = a.flag("quiet");
-  for (const auto& w : input->warnings())
-    if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", w.c_str());
-  Progress progress(!quiet && !a.flag("json"));
-  PackSummary sum;
-  s = packInput(*input, out, opt, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
-  progress.finish();
-  if (!s) return reportError(s);
-  s = bakeMissingModes(out, modes, bake, quiet || a.flag("json"));
-  if (!s) return reportError(s);
-  for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
-    if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());
+// The summary: JSON on stdout, or text on stderr.
+static void printSummary(const std::string& out, const PackSummary& sum, bool json) {
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
+  const unsigned cores = sum.threads ? sum.threads : std::max(1u, std::thread::hardware_concurrency());
+  // MPI ranks poll while they wait for each other: their waits count as busy.
+  const std::string ranks = sum.ranks > 1 ? " over " + std::to_string(sum.ranks) + " MPI ranks" : "";
   auto busy = [&](int phase) { return sum.seconds[phase] > 0 ? sum.cpuSeconds[phase] / sum.seconds[phase] : 0.0; };
-  if (sum.upToDate && !quiet && !a.flag("json"))
+  if (sum.upToDate && !json)
     std::fprintf(stderr, "%s is up to date (same points, files and options, hash %016llx, checked in %.2fs); --force repacks\n",
                  out.c_str(), (unsigned long long)sum.inputHash, sum.seconds[5]);
-  if (a.flag("json")) {
+  if (json) {
     std::printf("{\"output\": \"%s\", \"points\": %llu, \"skipped_points\": %llu, \"triangles\": %llu, \"cells\": %u, "
                 "\"forced_cells\": %u, \"degenerate_cells\": %u, \"layered_cells\": %u, \"outliers_removed\": %llu, "
                 "\"surface_samples\": %llu, "
@@ -254,17 +226,17 @@ int cmdPack(int argc, char** argv) {
                 "\"write\": %.3f, \"total\": %.3f}, ",
                 sum.seconds[0], sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], sum.seconds[5]);
     std::printf("\"cpu_seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
-                "\"write\": %.3f, \"total\": %.3f}, \"cores\": %u, \"mpts_per_s\": %.3f}\n",
+                "\"write\": %.3f, \"total\": %.3f}, \"cores\": %u, \"ranks\": %u, \"mpts_per_s\": %.3f}\n",
                 sum.cpuSeconds[0], sum.cpuSeconds[1], sum.cpuSeconds[2], sum.cpuSeconds[3], sum.cpuSeconds[4],
-                sum.cpuSeconds[5], std::max(1u, std::thread::hardware_concurrency()), mpts);
-  } else if (!quiet && !sum.upToDate) {
+                sum.cpuSeconds[5], cores, sum.ranks, mpts);
+  } else if (!sum.upToDate) {
     std::fprintf(stderr,
                  "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
                  "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
                  "  up %.3g,%.3g,%.3g (%s)\n"
                  "  file %.1f MiB (%.1f bytes/point), temporary chunk files %.1f MiB written\n"
                  "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n"
-                 "  cores busy %.2f of %u (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f)\n",
+                 "  cores busy %.2f of %u%s (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f)\n",
                  out.c_str(), (unsigned long long)sum.pointsRead,
                  sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
                  sum.outliersRemoved ? (" (" + std::to_string(sum.outliersRemoved) + " outliers removed)").c_str() : "",
@@ -276,8 +248,70 @@ int cmdPack(int argc, char** argv) {
                  double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.scratchBytes / 1048576.0,
                  sum.seconds[5], sum.seconds[0],
                  sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts, busy(5),
-                 std::max(1u, std::thread::hardware_concurrency()), busy(0), busy(1), busy(2), busy(3), busy(4));
+                 cores, ranks.c_str(), busy(0), busy(1), busy(2), busy(3), busy(4));
   }
+}
+
+int cmdPack(int argc, char** argv) {
+  Args a;
+  Status s = a.parse(argc, argv,
+                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
+                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves"},
+                     {"as-points", "strict", "force", "no-smooth", "reproducible", "json", "quiet", "help"},
+                     {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
+  if (a.flag("help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  if (!s) return reportError(s);
+  if (a.positionals().empty()) return reportError(Status::badInput("pack: no input files (see --help)"));
+  if (!a.has("output")) return reportError(Status::badInput("pack: -o OUT.hfa is required"));
+  PackOptions opt;
+  s = parsePackOptions(a, opt);
+  if (!s) return reportError(s);
+  std::vector<RenderMode> modes;
+  for (const std::string& m : splitList(a.get("modes"))) {
+    auto r = parseMode(m);
+    if (!r) return reportError(Status::badInput("--modes: " + r.status().message()));
+    modes.push_back(*r);
+  }
+  BakeRequest bake;
+  if (a.has("grooves")) {
+    bake.groovesFile = a.get("grooves");
+    if (!std::filesystem::is_regular_file(bake.groovesFile))
+      return reportError(Status::badInput("--grooves: " + bake.groovesFile + ": no such file"));
+    if (std::find(modes.begin(), modes.end(), RenderMode::kGrooves) == modes.end()) modes.push_back(RenderMode::kGrooves);
+  }
+  for (int i = 0; i < argc; ++i) opt.commandLine += std::string(i ? " " : "") + argv[i];
+  const std::string out = a.get("output");
+  if (std::filesystem::is_directory(out)) return reportError(Status::badInput(out + ": is a directory; give a file name"));
+
+  // Under mpirun or srun the ranks share the work; only rank 0 reports.
+  s = Cluster::start();
+  if (!s) return reportError(s);
+  struct ClusterStop {
+    ~ClusterStop() { Cluster::stop(); }
+  } clusterStop;
+  const bool root = Cluster::rank() == 0;
+  auto fail = [&](const Status& e) { return root ? reportError(e) : (e.kind() == ErrorKind::kBadInput ? 2 : 1); };
+  auto input = InputSet::open(a.positionals(), a.get("columns"));
+  if (!input) return fail(input.status());
+  s = checkNotAnInput(out, input->allPaths(), "-o");
+  if (!s) return fail(s);
+  const bool quiet = a.flag("quiet") || !root;
+  for (const auto& w : input->warnings())
+    if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", w.c_str());
+  Progress progress(!quiet && !a.flag("json"));
+  PackSummary sum;
+  s = packInput(*input, out, opt, [&](const char* p, uint64_t d, uint64_t t) { progress(p, d, t); }, sum);
+  progress.finish();
+  if (!s) return fail(s);
+  if (!root) return 0;
+  s = bakeMissingModes(out, modes, bake, quiet || a.flag("json"));
+  if (!s) return reportError(s);
+  for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
+    if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());
+  if (a.flag("json") || !quiet) printSummary(out, sum, a.flag("json"));
   return 0;
 }
 

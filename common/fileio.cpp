@@ -122,8 +122,27 @@ Status AtomicFile::commit() {
 void AtomicFile::abandon() {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
-  if (!tmp_.empty()) ::unlink(tmp_.c_str());
+  if (!tmp_.empty() && owner_) ::unlink(tmp_.c_str());
   tmp_.clear();
+}
+
+Status AtomicFile::join(const std::string& tempPath) {
+  abandon();
+  owner_ = false;
+  fd_ = ::open(tempPath.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd_ < 0) return Status::internal(tempPath + ": cannot open the output being written: " + std::strerror(errno));
+  tmp_ = path_ = tempPath;
+  return Status::ok();
+}
+
+Status AtomicFile::leave() {
+  if (fd_ < 0) return Status::ok();
+  const bool synced = fsync(fd_) == 0;
+  const std::string err = std::strerror(errno);
+  ::close(fd_);
+  fd_ = -1;
+  tmp_.clear();
+  return synced ? Status::ok() : Status::internal(path_ + ": fsync failed: " + err);
 }
 
 ScratchDir::~ScratchDir() {

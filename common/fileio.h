@@ -62,10 +62,15 @@ class AtomicFile {
   Status pwriteAll(const void* data, size_t n, uint64_t offset);
   Status commit();
   void abandon();
+  // Another process's temporary (the ranks of a cluster pack write their tiles into rank 0's):
+  // opened for writing; leave() syncs and closes it, and it is never renamed or removed here.
+  Status join(const std::string& tempPath);
+  Status leave();
 
  private:
   std::string path_, tmp_;
   int fd_ = -1;
+  bool owner_ = true;
 };
 
 // A private scratch directory removed (with its files) on destruction.

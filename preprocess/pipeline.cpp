@@ -14,12 +14,15 @@
 #include <cstdio>
 #include <filesystem>
 #include <mutex>
+#include <numeric>
 #include <unordered_map>
 
 #include "atlas/pack_file.h"
 #include "atlas/packing.h"
 #include "common/fileio.h"
+#include "common/serial.h"
 #include "preprocess/cell_margin.h"
+#include "preprocess/cluster.h"
 #include "preprocess/normals.h"
 #include "preprocess/pullpush.h"
 #include "preprocess/triangle_cells.h"
@@ -111,6 +114,10 @@ struct PackJob {
   std::string texelCap;    // what coarsened it ("" = nothing)
   std::vector<CellRecord> records;
   PackMeta meta{};
+  std::vector<int> owners;  // per chunk: the rank that processes it (chunkOwners)
+  uint64_t scratch0 = 0, raw0 = 0;  // chunk bytes this process had written before the pack
+  double otherCpu = 0;              // cluster pack: the other ranks' CPU seconds
+  uint64_t otherScratch[2] = {0, 0};  // and their chunk bytes (compressed, raw)
 };
 
 void decodePositions(const std::vector<ChunkPoint>& pts, const Quantizer& qz, std::vector<double>& pos) {
@@ -229,8 +236,9 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
 
 // Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h).
 // Drops the outliers from pts, pos and nrm.
-void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
-                     double chunkSpacing, ChunkTicker& ticker) {
+// Returns how many outliers it dropped.
+size_t fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
+                       double chunkSpacing, ChunkTicker& ticker) {
   NormalOrientation orient;
   orient.towardScanner = job.input.towardScanner();
   orient.center = job.bounds.centroid - job.origin;
@@ -246,10 +254,9 @@ void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<dou
   std::vector<uint8_t> keep;
   std::vector<float> local(pts.size(), 0.f);
   const size_t removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data());
-  job.sum.outliersRemoved += removed;
   for (size_t i = 0; i < pts.size(); ++i)
     pts[i].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
-  if (removed == 0) return;
+  if (removed == 0) return 0;
   size_t m = 0;
   for (size_t i = 0; i < pts.size(); ++i) {
     if (!keep[i]) continue;
@@ -261,6 +268,7 @@ void fitChunkSurface(PackJob& job, std::vector<ChunkPoint>& pts, std::vector<dou
   pts.resize(m);
   pos.resize(3 * m);
   nrm.resize(3 * m);
+  return removed;
 }
 
 // Sample spacing of a chunk's input points (points sampled on large triangles left out).
@@ -271,9 +279,55 @@ Spacing chunkSpacing(const std::vector<ChunkPoint>& pts, const std::vector<doubl
   return real.size() == pos.size() ? estimateSpacing(pos.data(), pts.size()) : estimateSpacing(real.data(), real.size() / 3);
 }
 
-// Records the octree's cells of chunk ci (frames, extents, which vertices and samples they hold).
-void addCells(PackJob& job, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
-              const std::vector<double>& pos, const std::vector<ChunkPoint>& sorted) {
+// What pass A found in one chunk, before it joins the job (mergeChunkCells): computed by the
+// rank that owns the chunk, merged in chunk order by every rank, so a cluster pack and a lone
+// process make the same cells. Cell ids are the chunk's own (0 = its first cell).
+struct ChunkCells {
+  std::vector<WorkCell> cells;
+  std::vector<std::pair<uint32_t, uint32_t>> samples;      // (triangle, cell) of surface samples
+  std::vector<std::pair<uint32_t, uint32_t>> vertexCells;  // (vertex, cell), triangle path
+  HeightMoments heights;
+  double spacing = 0, areaSpacing = 0;  // the chunk's sample spacings
+  uint64_t weight = 0;                  // points the spacings stand for
+  uint64_t count = 0, outliers = 0;     // points kept, points dropped as outliers
+  uint32_t layered = 0;
+
+  void write(ByteWriter& w) const {
+    w.put(cells);
+    w.put(samples);
+    w.put(vertexCells);
+    for (const Eigen::Vector3d* v : {&heights.sum, &heights.sum2, &heights.sum3}) w.put(std::array<double, 3>{v->x(), v->y(), v->z()});
+    w.put(heights.count);
+    w.put(std::array<double, 2>{spacing, areaSpacing});
+    w.put(std::array<uint64_t, 3>{weight, count, outliers});
+    w.put(layered);
+  }
+  void read(ByteReader& r) {
+    r.get(cells);
+    r.get(samples);
+    r.get(vertexCells);
+    for (Eigen::Vector3d* v : {&heights.sum, &heights.sum2, &heights.sum3}) {
+      std::array<double, 3> a;
+      r.get(a);
+      *v = Eigen::Vector3d(a[0], a[1], a[2]);
+    }
+    r.get(heights.count);
+    std::array<double, 2> sp;
+    r.get(sp);
+    spacing = sp[0];
+    areaSpacing = sp[1];
+    std::array<uint64_t, 3> n;
+    r.get(n);
+    weight = n[0];
+    count = n[1];
+    outliers = n[2];
+    r.get(layered);
+  }
+};
+
+// Records the octree's cells of a chunk (frames, extents, which vertices and samples they hold).
+void addCells(bool triangles, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
+              const std::vector<double>& pos, const std::vector<ChunkPoint>& sorted, ChunkCells& out) {
   for (const OctreeCell& c : oc) {
     WorkCell wc;
     wc.chunk = ci;
@@ -288,10 +342,10 @@ void addCells(PackJob& job, uint32_t ci, const std::vector<OctreeCell>& oc, cons
     }
     wc.rec.level = static_cast<uint8_t>(std::min(c.level, 255));
     wc.rec.flags = (c.forced ? kCellForced : 0) | (f.degenerate ? kCellDegenerate : 0);
-    job.sum.layeredCells += f.layered;
+    out.layered += f.layered;
     double e[6] = {1e300, -1e300, 1e300, -1e300, 1e300, -1e300};
     uint32_t real = 0;
-    const uint32_t cellId = static_cast<uint32_t>(job.cells.size());
+    const uint32_t cellId = static_cast<uint32_t>(out.cells.size());
     for (uint32_t k = c.first; k < c.first + c.count; ++k) {
       const Eigen::Vector3d d = vec(&pos[3 * size_t(idx[k])]) - f.centroid;
       const double uvw[3] = {d.dot(f.u), d.dot(f.v), d.dot(f.w)};
@@ -300,21 +354,43 @@ void addCells(PackJob& job, uint32_t ci, const std::vector<OctreeCell>& oc, cons
         e[2 * a + 1] = std::max(e[2 * a + 1], uvw[a]);
       }
       if (sorted[k].flags & kChunkSurfaceSample) {
-        job.sampleCells.emplace_back(sorted[k].vid, cellId);
+        out.samples.emplace_back(sorted[k].vid, cellId);
         wc.sampled = true;
       } else {
         ++real;
-        if (job.triangles) job.vertexCell[sorted[k].vid] = cellId;
+        if (triangles) out.vertexCells.emplace_back(sorted[k].vid, cellId);
       }
     }
     wc.rec.pointCount = real;
     std::copy(e, e + 6, wc.ext);
-    job.cells.push_back(wc);
+    out.cells.push_back(wc);
   }
 }
 
+// Chunk ci's cells join the job: ids after the cells of the chunks before it.
+void mergeChunkCells(PackJob& job, uint32_t ci, const ChunkCells& c) {
+  const uint32_t base = static_cast<uint32_t>(job.cells.size());
+  job.cells.insert(job.cells.end(), c.cells.begin(), c.cells.end());
+  for (const auto& [tri, cell] : c.samples) job.sampleCells.emplace_back(tri, base + cell);
+  for (const auto& [v, cell] : c.vertexCells) job.vertexCell[v] = base + cell;
+  job.heights.sum += c.heights.sum;
+  job.heights.sum2 += c.heights.sum2;
+  job.heights.sum3 += c.heights.sum3;
+  job.heights.count += c.heights.count;
+  if (c.spacing > 0) {
+    job.spacingSum += c.spacing * double(c.weight);
+    job.areaSpacingSum += c.areaSpacing * double(c.weight);
+    job.spacingWeight += c.weight;
+  }
+  job.chunkSpacing[ci] = c.spacing;
+  job.dist.chunks[ci].count = c.count;
+  job.sum.outliersRemoved += c.outliers;
+  job.sum.layeredCells += c.layered;
+}
+
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
-Status chunkCells(PackJob& job, uint32_t ci, uint64_t before) {
+Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, uint64_t before, uint64_t total,
+                  ChunkCells& out) {
   const ChunkInfo& ch = job.dist.chunks[ci];
   std::vector<ChunkPoint> pts;
   std::vector<double> pos;
@@ -323,17 +399,14 @@ Status chunkCells(PackJob& job, uint32_t ci, uint64_t before) {
   decodePositions(pts, job.qz, pos);
   givenNormals(job, pts, nrm);
   for (size_t i = 0; i < pts.size(); ++i)
-    if (!(pts[i].flags & kChunkSurfaceSample)) job.heights.add(Eigen::Vector3d(&pos[3 * i]));
+    if (!(pts[i].flags & kChunkSurfaceSample)) out.heights.add(Eigen::Vector3d(&pos[3 * i]));
   const Spacing spacing = chunkSpacing(pts, pos);
   const double sp = spacing.nearest;
-  if (sp > 0) {
-    job.spacingSum += sp * double(pts.size());
-    job.areaSpacingSum += std::max(spacing.area, sp) * double(pts.size());
-    job.spacingWeight += pts.size();
-  }
-  ChunkTicker ticker(job.progress, "octree", before, pts.size(), job.bounds.count + job.dist.surfaceSamples, 2);
-  if (!job.triangles) fitChunkSurface(job, pts, pos, nrm, sp, ticker);
-  job.chunkSpacing[ci] = sp;
+  out.spacing = sp;
+  out.areaSpacing = std::max(spacing.area, sp);
+  out.weight = pts.size();
+  ChunkTicker ticker(progress, "octree", before, pts.size(), total, 2);
+  if (!job.triangles) out.outliers = fitChunkSurface(job, pts, pos, nrm, sp, ticker);
   const size_t n = pts.size();
   std::vector<uint32_t> idx(n);
   for (uint32_t i = 0; i < n; ++i) idx[i] = i;
@@ -367,24 +440,87 @@ Status chunkCells(PackJob& job, uint32_t ci, uint64_t before) {
     for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
   }
   SA_RETURN_IF_ERROR(saveChunk(ch.path, sorted));
-  job.dist.chunks[ci].count = n;
-  addCells(job, ci, oc, idx, pos, sorted);
+  out.count = n;
+  addCells(job.triangles, ci, oc, idx, pos, sorted, out);
   return Status::ok();
+}
+
+// ---- the ranks of a cluster pack (preprocess/cluster.h) ----
+// The rank that processes each chunk in passes A and B: the largest chunks first, each to the
+// least loaded rank (one rank: every chunk is rank 0's).
+std::vector<int> chunkOwners(const std::vector<ChunkInfo>& chunks, int ranks) {
+  std::vector<uint32_t> order(chunks.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return chunks[a].count > chunks[b].count; });
+  std::vector<uint64_t> load(std::max(1, ranks), 0);
+  std::vector<int> owner(chunks.size(), 0);
+  for (uint32_t ci : order) {
+    const int r = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
+    owner[ci] = r;
+    load[r] += chunks[ci].count;
+  }
+  return owner;
+}
+
+// Points of the chunks this rank owns (before outliers are dropped).
+uint64_t pointsOwned(const PackJob& job) {
+  uint64_t n = 0;
+  for (size_t ci = 0; ci < job.dist.chunks.size(); ++ci)
+    if (job.owners[ci] == Cluster::rank()) n += job.dist.chunks[ci].count;
+  return n;
+}
+
+// A rank sees only its own chunks' progress: reported as the whole job's (rank 0 prints it).
+ProgressFn shareProgress(const ProgressFn& p, uint64_t mine, uint64_t total) {
+  if (!p || mine == total) return p;
+  return [p, mine, total](const char* phase, uint64_t done, uint64_t) {
+    p(phase, mine ? static_cast<uint64_t>(double(done) / double(mine) * double(total)) : total, total);
+  };
+}
+
+// Every rank's ChunkCells (chunk index, then the record, for each chunk it owns) merged by every
+// rank in chunk order.
+void mergeRanksCells(PackJob& job, const std::vector<uint8_t>& mine) {
+  std::vector<ChunkCells> byChunk(job.dist.chunks.size());
+  for (const std::vector<uint8_t>& bytes : Cluster::allGather(mine)) {
+    ByteReader r(bytes);
+    while (!r.done()) {
+      uint32_t ci = 0;
+      r.get(ci);
+      SA_CHECK(ci < byChunk.size());
+      byChunk[ci].read(r);
+    }
+  }
+  for (uint32_t ci = 0; ci < byChunk.size(); ++ci) mergeChunkCells(job, ci, byChunk[ci]);
 }
 
 Status cellsPhase(PackJob& job) {
   const PhaseTimer timer;
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
   job.chunkSpacing.assign(job.dist.chunks.size(), 0.0);
+  job.owners = chunkOwners(job.dist.chunks, Cluster::size());
+  const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
+  const ProgressFn progress = shareProgress(job.progress, mine, total);
+  if (progress) progress("octree", 0, mine);
   uint64_t processed = 0;
-  const uint64_t total = job.bounds.count + job.dist.surfaceSamples;
-  if (job.progress) job.progress("octree", 0, total);
-  for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
+  ByteWriter shared;  // cluster pack: this rank's chunks' cells, for the others
+  Status s;
+  for (uint32_t ci = 0; ci < job.dist.chunks.size() && s; ++ci) {
+    if (job.owners[ci] != Cluster::rank()) continue;
     const uint64_t count = job.dist.chunks[ci].count;  // before outliers are dropped
-    SA_RETURN_IF_ERROR(chunkCells(job, ci, processed));
+    ChunkCells cells;
+    s = chunkCells(job, ci, progress, processed, mine, cells);
     processed += count;
-    if (job.progress) job.progress("octree", processed, total);
+    if (progress) progress("octree", processed, mine);
+    if (!Cluster::distributed()) {
+      mergeChunkCells(job, ci, cells);
+    } else {
+      shared.put(ci);
+      cells.write(shared);
+    }
   }
+  SA_RETURN_IF_ERROR(Cluster::agree(s));
+  if (Cluster::distributed()) mergeRanksCells(job, shared.bytes());
   std::sort(job.sampleCells.begin(), job.sampleCells.end());
   job.sampleCells.erase(std::unique(job.sampleCells.begin(), job.sampleCells.end()), job.sampleCells.end());
   timer.stop(job.sum, 2);
@@ -779,15 +915,67 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
 Status tilesPhase(PackJob& job, PackWriter& writer) {
   std::vector<std::vector<uint32_t>> chunkCellIds(job.dist.chunks.size());
   for (uint32_t i = 0; i < job.cells.size(); ++i) chunkCellIds[job.cells[i].chunk].push_back(i);
+  const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
+  const ProgressFn progress = shareProgress(job.progress, mine, total);
   uint64_t processed = 0;
-  const uint64_t total = job.bounds.count + job.dist.surfaceSamples;
-  if (job.progress) job.progress("heightmaps", 0, total);
-  for (uint32_t ci = 0; ci < job.dist.chunks.size(); ++ci) {
-    ChunkTicker ticker(job.progress, "heightmaps", processed, job.dist.chunks[ci].count, total);
-    SA_RETURN_IF_ERROR(chunkTiles(job, ci, chunkCellIds[ci], writer, ticker));
+  if (progress) progress("heightmaps", 0, mine);
+  Status s;
+  for (uint32_t ci = 0; ci < job.dist.chunks.size() && s; ++ci) {
+    if (job.owners[ci] != Cluster::rank()) continue;
+    ChunkTicker ticker(progress, "heightmaps", processed, job.dist.chunks[ci].count, mine);
+    s = chunkTiles(job, ci, chunkCellIds[ci], writer, ticker);
     processed += job.dist.chunks[ci].count;
     // The chunks hold the points left after outlier removal: the last one ends the phase.
-    if (job.progress) job.progress("heightmaps", ci + 1 == job.dist.chunks.size() ? total : processed, total);
+    if (progress) progress("heightmaps", ci + 1 == job.dist.chunks.size() ? mine : processed, mine);
+  }
+  return s;
+}
+
+// What a rank of a cluster pack tells rank 0 after its tiles: the height ranges its tiles
+// widened, and for the summary its CPU seconds, chunk bytes and threads.
+struct RankReport {
+  std::vector<uint32_t> ids;
+  std::vector<std::array<double, 2>> heights;
+  std::array<double, 3> cpu{};      // normals + octree, heightmaps, the whole run
+  std::array<uint64_t, 3> stats{};  // chunk bytes, their raw bytes, threads
+  template <class IO>
+  void io(IO& b) {
+    b.io(ids);
+    b.io(heights);
+    b.io(cpu);
+    b.io(stats);
+  }
+};
+
+// Cluster pack, after every rank's tiles: rank 0's writer learns the others' cells' height
+// ranges (their texels are in the file already) and the summary their work.
+Status joinTiles(PackJob& job, PackWriter& writer, Status s) {
+  if (!Cluster::distributed()) return s;
+  if (Cluster::rank() != 0 && s) s = writer.leave();
+  SA_RETURN_IF_ERROR(Cluster::agree(s));
+  RankReport mine;
+  for (uint32_t i = 0; i < job.cells.size(); ++i)
+    if (job.owners[job.cells[i].chunk] == Cluster::rank()) {
+      mine.ids.push_back(i);
+      mine.heights.push_back({writer.cell(i).box[4], writer.cell(i).box[5]});
+    }
+  mine.cpu = {job.sum.cpuSeconds[2], job.sum.cpuSeconds[3], processCpuSeconds()};
+  mine.stats = {chunkBytesWritten() - job.scratch0, chunkRecordBytesWritten() - job.raw0, uint64_t(Cluster::threads())};
+  ByteWriter w;
+  mine.io(w);
+  const std::vector<std::vector<uint8_t>> all = Cluster::allGather(w.bytes());
+  job.sum.ranks = static_cast<uint32_t>(all.size());
+  for (size_t rank = 1; rank < all.size(); ++rank) {
+    RankReport other;
+    ByteReader r(all[rank]);
+    other.io(r);
+    for (size_t k = 0; k < other.ids.size(); ++k) writer.setCellHeights(other.ids[k], other.heights[k][0], other.heights[k][1]);
+    job.sum.cpuSeconds[2] += other.cpu[0];
+    job.sum.cpuSeconds[3] += other.cpu[1];
+    job.otherCpu += other.cpu[2];
+    job.otherScratch[0] += other.stats[0];
+    job.otherScratch[1] += other.stats[1];
+    job.sum.threads += static_cast<uint32_t>(other.stats[2]);
   }
   return Status::ok();
 }
@@ -802,7 +990,7 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 6;  // 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated
+  constexpr int kPipelineRevision = 7;  // 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
@@ -846,35 +1034,125 @@ static uint64_t combineHash(uint64_t setup, uint64_t content) {
   return h == 0 ? 1 : h;
 }
 
-Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& opt,
-                 const ProgressFn& progress, PackSummary& sum) {
-  const PhaseTimer whole;
-  const auto tStart = whole.wall;
-  sum = PackSummary{};
-  sum.warnings = input.warnings();
-  auto setup = hashSetup(input, opt);
+namespace {
+
+// Rank 0 (or the lone process): the input hash, bounds, the up-to-date check, distribution.
+Status rootPhases(PackJob& job, const std::string& outPath, Clock::time_point tStart) {
+  PackSummary& sum = job.sum;
+  auto setup = hashSetup(job.input, job.opt);
   if (!setup) return setup.status();
   sum.hashSeconds = secondsSince(tStart);
-  PackJob job(input, opt, progress, sum);
-  job.triangles = input.hasTriangles() && !opt.asPoints;
-  job.fileNormals = input.allHaveNormals();
   SA_RETURN_IF_ERROR(boundsPhase(job));  // also hashes the points as they are read
   sum.inputHash = combineHash(*setup, job.bounds.contentHash);
-  {
-    PackReader existing;
-    if (!opt.force && std::filesystem::exists(outPath) && existing.open(outPath).isOk() &&
-        existing.meta().inputHash == sum.inputHash) {
-      summarizeExisting(existing, sum);
-      sum.upToDate = true;
-      sum.seconds[5] = secondsSince(tStart);
-      return Status::ok();
-    }
+  PackReader existing;
+  if (!job.opt.force && std::filesystem::exists(outPath) && existing.open(outPath).isOk() &&
+      existing.meta().inputHash == sum.inputHash) {
+    summarizeExisting(existing, sum);
+    sum.upToDate = true;
+    sum.seconds[5] = secondsSince(tStart);
+    return Status::ok();
   }
-  const uint64_t scratch0 = chunkBytesWritten(), raw0 = chunkRecordBytesWritten();
   sum.fromTriangles = job.triangles;
   sum.normalsEstimated = !job.fileNormals && !job.triangles;
   sum.hasColor = job.color && !job.triangles;
-  SA_RETURN_IF_ERROR(distributePhase(job, outPath));
+  return distributePhase(job, outPath);
+}
+
+template <class IO, class M>
+void ioMatrix(IO& io, M& m) {
+  for (Eigen::Index i = 0; i < m.size(); ++i) io.io(m.data()[i]);
+}
+
+// What rootPhases leaves for the passes that follow; the chunk files themselves are on the
+// filesystem the ranks share.
+template <class IO>
+void rootState(IO& io, PackJob& job) {
+  PackSummary& s = job.sum;
+  io.io(s.pointsRead), io.io(s.pointsSkipped), io.io(s.warnings), io.io(s.inputHash), io.io(s.hashSeconds);
+  io.io(s.triangles), io.io(s.surfaceSamples), io.io(s.chunks), io.io(s.fromTriangles), io.io(s.normalsEstimated);
+  io.io(s.hasColor), io.io(s.upToDate), io.io(s.seconds), io.io(s.cpuSeconds), io.io(job.color);
+  BoundsInfo& b = job.bounds;
+  ioMatrix(io, b.min), ioMatrix(io, b.max), ioMatrix(io, b.centroid), ioMatrix(io, b.covariance);
+  io.io(b.count), io.io(b.skipped), io.io(b.colorVaries), io.io(b.contentHash);
+  ioMatrix(io, job.origin), ioMatrix(io, job.sheetSide), ioMatrix(io, job.qz.cubeMin), io.io(job.qz.cubeSize);
+  DistributeResult& d = job.dist;
+  uint64_t n = d.chunks.size();
+  io.io(n);
+  d.chunks.resize(n);
+  for (ChunkInfo& c : d.chunks) io.io(c.path), io.io(c.count), io.io(c.level), io.io(c.ix), io.io(c.iy), io.io(c.iz);
+  io.io(d.triangles), io.io(d.surfaceSamples), io.io(d.surfaceSampleStep), io.io(d.trianglePath);
+  io.io(d.vertexPos), io.io(d.vertexNormal), io.io(d.vertexCone);
+}
+
+// Cluster pack: every rank learns rank 0's outcome and, when it went on, its state.
+Status shareRootPhases(PackJob& job, const Status& s) {
+  SA_RETURN_IF_ERROR(Cluster::agree(s));
+  if (!Cluster::distributed()) return Status::ok();
+  ByteWriter w;
+  if (Cluster::rank() == 0) rootState(w, job);
+  Cluster::broadcast(w.bytes());
+  if (Cluster::rank() != 0) {
+    ByteReader r(w.bytes());
+    rootState(r, job);
+  }
+  return Status::ok();
+}
+
+// Rank 0 creates the output's temporary; the other ranks write their tiles into it.
+Status openWriter(const PackJob& job, const std::string& outPath, PackWriter& writer) {
+  const std::string note = makeNote(job);
+  Status s = Cluster::rank() == 0 ? writer.open(outPath, job.meta, job.records, note) : Status::ok();
+  SA_RETURN_IF_ERROR(Cluster::agree(s));
+  if (!Cluster::distributed()) return Status::ok();
+  ByteWriter w;
+  if (Cluster::rank() == 0) w.put(writer.tempPath());
+  Cluster::broadcast(w.bytes());
+  if (Cluster::rank() != 0) {
+    ByteReader r(w.bytes());
+    std::string temp;
+    r.get(temp);
+    s = writer.join(temp, job.meta, job.records, note);
+  }
+  return Cluster::agree(s);
+}
+
+// Rank 0: META with the timings (zero when reproducible), checksums, the rename into place.
+Status writePack(PackJob& job, PackWriter& writer, const std::string& outPath, const PhaseTimer& whole) {
+  PackSummary& sum = job.sum;
+  const PhaseTimer write;
+  if (job.progress) job.progress("write", 0, 1);
+  if (!job.opt.reproducible) {
+    for (int i = 0; i < 4; ++i) job.meta.seconds[i] = sum.seconds[i];
+    job.meta.seconds[5] = secondsSince(whole.wall);
+  }
+  writer.setMeta(job.meta);
+  SA_RETURN_IF_ERROR(writer.finish());
+  write.stop(sum, 4);
+  whole.stop(sum, 5);
+  sum.cpuSeconds[5] += job.otherCpu;
+  sum.scratchBytes = chunkBytesWritten() - job.scratch0 + job.otherScratch[0];
+  sum.scratchRawBytes = chunkRecordBytesWritten() - job.raw0 + job.otherScratch[1];
+  if (job.progress) job.progress("write", 1, 1);
+  auto sz = fileSize(outPath);
+  sum.fileBytes = sz ? *sz : 0;
+  return Status::ok();
+}
+
+}  // namespace
+
+Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& opt,
+                 const ProgressFn& progress, PackSummary& sum) {
+  const PhaseTimer whole;
+  sum = PackSummary{};
+  sum.warnings = input.warnings();
+  sum.threads = static_cast<uint32_t>(Cluster::threads());
+  PackJob job(input, opt, progress, sum);
+  job.triangles = input.hasTriangles() && !opt.asPoints;
+  job.fileNormals = input.allHaveNormals();
+  job.scratch0 = chunkBytesWritten();
+  job.raw0 = chunkRecordBytesWritten();
+  SA_RETURN_IF_ERROR(shareRootPhases(job, Cluster::rank() == 0 ? rootPhases(job, outPath, whole.wall) : Status::ok()));
+  if (sum.upToDate) return Status::ok();
   SA_RETURN_IF_ERROR(cellsPhase(job));
   upPhase(job);
   const PhaseTimer heightmaps;
@@ -882,23 +1160,11 @@ Status packInput(const InputSet& input, const std::string& outPath, const PackOp
   layoutPhase(job);
   job.meta = makeMeta(job);
   PackWriter writer;
-  SA_RETURN_IF_ERROR(writer.open(outPath, job.meta, job.records, makeNote(job)));
-  SA_RETURN_IF_ERROR(tilesPhase(job, writer));
+  SA_RETURN_IF_ERROR(openWriter(job, outPath, writer));
+  const Status tiles = tilesPhase(job, writer);
   heightmaps.stop(sum, 3);  // layout included
-  const PhaseTimer write;
-  if (progress) progress("write", 0, 1);
-  for (int i = 0; i < 4; ++i) job.meta.seconds[i] = sum.seconds[i];
-  job.meta.seconds[5] = secondsSince(tStart);
-  writer.setMeta(job.meta);
-  SA_RETURN_IF_ERROR(writer.finish());
-  write.stop(sum, 4);
-  whole.stop(sum, 5);
-  sum.scratchBytes = chunkBytesWritten() - scratch0;
-  sum.scratchRawBytes = chunkRecordBytesWritten() - raw0;
-  if (progress) progress("write", 1, 1);
-  auto sz = fileSize(outPath);
-  sum.fileBytes = sz ? *sz : 0;
-  return Status::ok();
+  SA_RETURN_IF_ERROR(joinTiles(job, writer, tiles));
+  return Cluster::agree(Cluster::rank() == 0 ? writePack(job, writer, outPath, whole) : Status::ok());
 }
 
 }  // namespace sa

@@ -25,6 +25,7 @@ struct PackOptions {
   bool asPoints = false;          // ignore faces: pull-push from the vertices
   bool strict = false;            // NaN/Inf coordinates are an error instead of skipped
   bool force = false;             // repack even when the output is up to date
+  bool reproducible = false;      // no timings in META: the same input and options give the same bytes
   Eigen::Vector3d up = Eigen::Vector3d::Zero();  // zero: from the format's convention or the data
   OctreeParams octree;
   int normalNeighbours = 24;
@@ -43,6 +44,8 @@ struct PackSummary {
   double spacing = 0, areaSpacing = 0, texelSize = 0;
   double seconds[6] = {0, 0, 0, 0, 0, 0};     // count, distribute, normals+octree, heightmaps, write, total
   double cpuSeconds[6] = {0, 0, 0, 0, 0, 0};  // the same phases' user + system seconds over all threads
+  uint32_t ranks = 1;    // processes of a cluster pack (preprocess/cluster.h)
+  uint32_t threads = 0;  // threads over all ranks
   std::vector<uint32_t> cellsPerLevel;
   bool normalsEstimated = false, fromTriangles = false, hasColor = false;
   Eigen::Vector3d up = Eigen::Vector3d::Zero();

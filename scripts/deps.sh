@@ -8,7 +8,7 @@ pkgs=(
   libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
   libglfw3-dev libimgui-dev libstb-dev xvfb xauth
   libgtest-dev libgmock-dev libbenchmark-dev nlohmann-json3-dev libxxhash-dev libzstd-dev
-  libpcl-dev libdraco-dev
+  libpcl-dev libdraco-dev libopenmpi-dev openmpi-bin
 )
 missing=()
 for p in "${pkgs[@]}"; do
