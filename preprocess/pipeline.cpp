@@ -499,6 +499,9 @@ Status cellsPhase(PackJob& job) {
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
   job.chunkSpacing.assign(job.dist.chunks.size(), 0.0);
   job.owners = chunkOwners(job.dist.chunks, Cluster::size());
+  if (job.dist.chunks.size() < size_t(Cluster::size()))
+    job.sum.warnings.push_back(std::to_string(job.dist.chunks.size()) + " chunk(s) for " + std::to_string(Cluster::size()) +
+                               " MPI ranks: ranks without a chunk wait (a smaller --mem-budget makes more chunks)");
   const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
   const ProgressFn progress = shareProgress(job.progress, mine, total);
   if (progress) progress("octree", 0, mine);
