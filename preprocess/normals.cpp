@@ -137,6 +137,9 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
 // spreading breadth-first from the well-decided ones over the k-nearest-neighbour graph (Hoppe
 // et al. 1992's propagation, limited to the undecided points). A wall thus inherits "outward"
 // from the roof edge and the ground at its foot through their smoothly turning normals.
+// 0.5 (60 degrees off the cue): at 0.25 the tilted normals a chunk's face leaves on a wall it cut
+// off from its foot (one-sided neighbourhoods lean by 15-30 degrees) still decided, and seeded
+// the whole wall with the wrong sign (docs/BENCHMARKS.md, "Chunk faces and estimated normals").
 constexpr double kWeakCue = 0.5;
 
 // Whether the cue toward t barely decides the sign of normal n (a zero t decides nothing).
