@@ -431,13 +431,16 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   }
   std::vector<OctreeCell> oc;
   buildOctree(pos.data(), nrm.data(), idx, cmin, csize, ch.level, op, oc, cone.empty() ? nullptr : cone.data());
-  // Rewrite the chunk in cell order with its normals and (smoothed) positions, for pass B.
+  // Rewrite the chunk in cell order with its normals and (smoothed) positions, for pass B. A point
+  // input's pass B needs neither the point's index in its file nor its scan: zeroed, their planes
+  // of the byte-shuffled frames compress to nothing (the triangle path keeps both).
   std::vector<ChunkPoint> sorted(n);
   for (size_t i = 0; i < n; ++i) {
     const size_t s = idx[i];
     sorted[i] = pts[s];
     std::copy(&nrm[3 * s], &nrm[3 * s] + 3, sorted[i].n);
     for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
+    if (!job.triangles) sorted[i].vid = sorted[i].scan = 0;
   }
   SA_RETURN_IF_ERROR(saveChunk(ch.path, sorted));
   out.count = n;
