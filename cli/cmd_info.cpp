@@ -37,6 +37,15 @@ TexelNote texelNote(const std::string& note) {
   return t;
 }
 
+struct TexelRange {
+  double min = 0, median = 0, max = 0;
+};
+TexelRange texelRange(std::vector<double> t) {
+  if (t.empty()) return {};
+  std::sort(t.begin(), t.end());
+  return {t.front(), t[t.size() / 2], t.back()};
+}
+
 // Reads every point of one input (bounded memory) for counts, bounds and attribute ranges.
 class InputStats : public BatchSink {
  public:
@@ -171,10 +180,12 @@ int cmdInfo(int argc, char** argv) {
   if (!s) return reportError(s);
   const PackMeta& m = pack.meta();
   std::map<int, uint32_t> perLevel;
+  std::map<int, std::vector<double>> texelsPerLevel;  // each cell's texel: its box over its tile
   uint32_t forced = 0, degenerate = 0;
   uint64_t tileTexels = 0;
   for (const CellRecord& c : pack.cells()) {
     ++perLevel[c.level];
+    texelsPerLevel[c.level].push_back((c.box[1] - c.box[0]) / std::max<uint16_t>(1, c.tileW));
     forced += (c.flags & kCellForced) != 0;
     degenerate += (c.flags & kCellDegenerate) != 0;
     tileTexels += uint64_t(c.tileW) * c.tileH;
@@ -196,6 +207,13 @@ int cmdInfo(int argc, char** argv) {
     bool first = true;
     for (auto [l, n] : perLevel) {
       std::printf("%s\"%d\": %u", first ? "" : ", ", l, n);
+      first = false;
+    }
+    std::printf("}, \"texel_per_level\": {");
+    first = true;
+    for (auto& [l, t] : texelsPerLevel) {
+      const TexelRange r = texelRange(t);
+      std::printf("%s\"%d\": [%.6g, %.6g, %.6g]", first ? "" : ", ", l, r.min, r.median, r.max);
       first = false;
     }
     std::printf("}, \"texels\": %llu, \"page_width\": %u, \"page_height\": %u, \"pages\": %u, \"atlas_occupancy\": %.4f, "
@@ -246,6 +264,13 @@ int cmdInfo(int argc, char** argv) {
   std::printf("levels   ");
   for (auto [l, n] : perLevel) std::printf(" L%d:%u", l, n);
   std::printf("\n");
+  std::printf("resolution");
+  for (auto& [l, t] : texelsPerLevel) std::printf(" L%d:%.4g", l, texelRange(t).median);
+  std::printf(" (median texel per octree level");
+  std::vector<double> all;
+  for (auto& [l, t] : texelsPerLevel) all.insert(all.end(), t.begin(), t.end());
+  const TexelRange whole = texelRange(all);
+  std::printf("; %.4g-%.4g over cells)\n", whole.min, whole.max);
   std::printf("texels    %llu in %u page(s) of %ux%u (occupancy %.1f%%), texel %.4g, sample spacing %.4g\n",
               (unsigned long long)tileTexels, m.pageCount, m.pageWidth, m.pageHeight, 100.0 * double(tileTexels) / double(pageTexels),
               m.texelSize, m.sampleSpacing);
@@ -253,7 +278,8 @@ int cmdInfo(int argc, char** argv) {
     std::printf("detail    LOST: texels %.2fx coarser than the data's %.4g, capped by %s (repack with a larger --texels)\n",
                 m.texelSize / tn.wanted, tn.wanted, tn.cap.c_str());
   else if (tn.present)
-    std::printf("detail    full: the texel is the data's (%.4g = half the sample's area spacing, or --texel-size)\n", tn.wanted);
+    std::printf("detail    full: the texels are the data's (median %.4g: half each cell's area spacing, or --texel-size)\n",
+                tn.wanted);
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
   std::printf("timings  ");
   if (m.seconds[5] == 0) std::printf(" not recorded (packed with --reproducible)");

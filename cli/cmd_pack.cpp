@@ -39,10 +39,11 @@ const char* kHelp =
     "options:\n"
     "  -o, --output FILE      the pack to write (written atomically: FILE appears only when complete)\n"
     "  --mem-budget SIZE      working memory for points in flight (default 1G; suffixes K, M, G)\n"
-    "  --texels N             texel budget over all height maps (default 64M); a budget that makes\n"
-    "                         texels coarser than the data's is reported (summary, 'info': lost detail)\n"
-    "  --texel-size X         texel size in input units (default: half the median sample spacing,\n"
-    "                         enlarged if the budget requires)\n"
+    "  --texels N             cap on the texels over all height maps (default: none beyond 8 per\n"
+    "                         input point); a cap that makes texels coarser than the data's is\n"
+    "                         reported (summary, 'info': lost detail)\n"
+    "  --texel-size X         one texel size for every cell, in input units (default: per cell, half\n"
+    "                         its points' median area spacing, within 4x of the pack's either way)\n"
     "  --max-depth N          deepest octree level (default 10; the paper uses 6-10)\n"
     "  --max-angle DEG        height-field test: largest angle between a normal and the cell's\n"
     "                         plane normal (default 85; the paper's test is 90)\n"
@@ -209,14 +210,14 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                 "\"forced_cells\": %u, \"degenerate_cells\": %u, \"layered_cells\": %u, \"outliers_removed\": %llu, "
                 "\"surface_samples\": %llu, "
                 "\"chunks\": %u, \"pages\": %u, \"page_width\": %u, \"page_height\": %u, "
-                "\"texels\": %llu, \"texel_size\": %.9g, \"sample_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
+                "\"texels\": %llu, \"texel_size\": %.9g, \"texel_min\": %.9g, \"texel_max\": %.9g, \"sample_spacing\": %.9g, \"area_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
                 "\"up_source\": \"%s\", \"bytes\": %llu, "
                 "\"bytes_per_point\": %.3f, \"scratch_bytes\": %llu, \"scratch_raw_bytes\": %llu, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
                 "\"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
                 (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.layeredCells,
                 (unsigned long long)sum.outliersRemoved, (unsigned long long)sum.surfaceSamples, sum.chunks, sum.pages, sum.pageWidth, sum.pageHeight,
-                (unsigned long long)sum.texels, sum.texelSize, sum.spacing, sum.up.x(), sum.up.y(), sum.up.z(),
+                (unsigned long long)sum.texels, sum.texelSize, sum.texelMin, sum.texelMax, sum.spacing, sum.areaSpacing, sum.up.x(), sum.up.y(), sum.up.z(),
                 upSourceName(sum.upSource),
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
                 (unsigned long long)sum.scratchBytes, (unsigned long long)sum.scratchRawBytes, sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
@@ -232,7 +233,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
   } else if (!sum.upToDate) {
     std::fprintf(stderr,
                  "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
-                 "  texels %llu (texel %.4g, spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
+                 "  texels %llu (texel %.4g, %.4g-%.4g over cells; spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
                  "  up %.3g,%.3g,%.3g (%s)\n"
                  "  file %.1f MiB (%.1f bytes/point), temporary chunk files %.1f MiB written\n"
                  "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n"
@@ -241,7 +242,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                  sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
                  sum.outliersRemoved ? (" (" + std::to_string(sum.outliersRemoved) + " outliers removed)").c_str() : "",
                  sum.cells, sum.forcedCells, sum.layeredCells, sum.chunks, (unsigned long long)sum.texels, sum.texelSize,
-                 sum.spacing, sum.pages, sum.pageWidth, sum.pageHeight,
+                 sum.texelMin, sum.texelMax, sum.spacing, sum.pages, sum.pageWidth, sum.pageHeight,
                  sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
                  sum.normalsEstimated ? ", normals estimated" : "", sum.up.x(), sum.up.y(), sum.up.z(),
                  upSourceName(sum.upSource), sum.fileBytes / 1048576.0,

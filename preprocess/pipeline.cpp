@@ -61,6 +61,7 @@ struct WorkCell {
   uint32_t chunk = 0, first = 0, count = 0;  // range of the chunk's points (cell order), surface samples included
   double ext[6] = {0, 0, 0, 0, 0, 0};        // point extents in the frame: uMin uMax vMin vMax wMin wMax
   bool sampled = false;                      // holds points sampled on large triangles
+  float spacing = 0;  // point inputs: the median area spacing of its points (0: unknown, use the pack's)
 };
 
 // Progress from inside one chunk's parallel loops: threads add the points they finished; the
@@ -109,8 +110,9 @@ struct PackJob {
   HeightMoments heights;             // of the input points, for the sign of a terrain's up axis
   double spacingSum = 0, areaSpacingSum = 0;
   uint64_t spacingWeight = 0;
-  double texel = 0;
-  double texelWanted = 0;  // the texel the data asked for (before any cap)
+  double texel = 0;        // the median of cellTexel
+  std::vector<double> cellTexel;  // per cell: its texel (world units)
+  double texelWanted = 0;  // the median texel the data asked for (before any cap)
   std::string texelCap;    // what coarsened it ("" = nothing)
   std::vector<CellRecord> records;
   PackMeta meta{};
@@ -325,6 +327,18 @@ struct ChunkCells {
   }
 };
 
+// The median local area spacing (ChunkPoint::spacing, relative to the chunk's spacing) of the
+// input points in sorted[first, first + count); 0 when none is known (meshes, surface samples).
+float medianSpacing(const std::vector<ChunkPoint>& sorted, uint32_t first, uint32_t count, double chunkSpacing) {
+  std::vector<uint16_t> s;
+  s.reserve(count);
+  for (uint32_t k = first; k < first + count; ++k)
+    if (sorted[k].spacing && !(sorted[k].flags & kChunkSurfaceSample)) s.push_back(sorted[k].spacing);
+  if (s.empty() || !(chunkSpacing > 0)) return 0.f;
+  std::nth_element(s.begin(), s.begin() + long(s.size() / 2), s.end());
+  return float(s[s.size() / 2] * chunkSpacing / 1024);
+}
+
 // Records the octree's cells of a chunk (frames, extents, which vertices and samples they hold).
 void addCells(bool triangles, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
               const std::vector<double>& pos, const std::vector<ChunkPoint>& sorted, ChunkCells& out) {
@@ -362,6 +376,7 @@ void addCells(bool triangles, uint32_t ci, const std::vector<OctreeCell>& oc, co
       }
     }
     wc.rec.pointCount = real;
+    wc.spacing = medianSpacing(sorted, c.first, c.count, out.spacing);
     std::copy(e, e + 6, wc.ext);
     out.cells.push_back(wc);
   }
@@ -539,68 +554,117 @@ Status cellsPhase(PackJob& job) {
 }
 
 // ---- texel size, tiles, atlas layout ----
+// How far a cell's tile reaches past its points' extents at texel t. Point tiles: the coverage
+// radius. Triangle tiles hold their triangles whole (assignPhase grew the extents) plus a texel,
+// and cells holding points sampled on large triangles reach the lattice step past those points.
+double tilePad(const PackJob& job, const WorkCell& c, double t) {
+  if (!job.triangles) return job.opt.coverageRadius * job.sum.spacing;
+  return std::max(t, c.sampled ? job.dist.surfaceSampleStep : 0.0);
+}
+
+// The texel each cell's data asks for. Point inputs: from the area each of the cell's own points
+// stands for (the median over the cell; the nearest-neighbour spacing underestimates where
+// samples come in lines), down to 1/kLocalTexelRefine of the pack's, so a survey's dense
+// overlaps and a scan's near side keep their detail. Never coarser than the pack's: edges and
+// height jumps are placed to a texel, and coarser texels in sparse cells drew surface away from
+// the points (autzen: pixels over 3 spacings from any point 0.5 -> 1.9 %). Meshes (from the
+// vertex spacing) and --texel-size: one texel for every cell.
+std::vector<double> wantedTexels(const PackJob& job) {
+  const PackOptions& opt = job.opt;
+  const double pack = opt.texelSize > 0 ? opt.texelSize
+                                        : (job.triangles ? job.sum.spacing : job.sum.areaSpacing) * opt.texelPerSpacing;
+  std::vector<double> t(job.cells.size(), pack);
+  if (opt.texelSize > 0 || job.triangles) return t;
+  for (size_t i = 0; i < t.size(); ++i)
+    if (job.cells[i].spacing > 0)
+      t[i] = std::clamp(double(job.cells[i].spacing) * opt.texelPerSpacing, pack / kLocalTexelRefine, pack);
+  return t;
+}
+
+// The most texels a pack may have: --texels when given; otherwise kMaxTexelsPerPoint per input
+// point (meshes: per vertex and surface sample, and at least 64 Mi), a bound on bytes per point
+// that the data's own spacing meets unless samples are very unevenly spread.
+uint64_t texelCap(const PackJob& job) {
+  if (job.opt.texelBudget) return job.opt.texelBudget;
+  const uint64_t samples = job.bounds.count + (job.triangles ? job.dist.surfaceSamples : 0);
+  return std::max<uint64_t>(job.triangles ? uint64_t(64) << 20 : 4096, kMaxTexelsPerPoint * samples);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+// Tile sizes at texels `scale` x `wanted`; returns the texels over all tiles.
+uint64_t tileSizes(const PackJob& job, const std::vector<double>& wanted, double scale, std::vector<TileSize>& sizes) {
+  const uint32_t maxTile = job.opt.maxPageSize - 2;
+  uint64_t texels = 0;
+  sizes.resize(job.cells.size());
+  for (size_t i = 0; i < job.cells.size(); ++i) {
+    const WorkCell& c = job.cells[i];
+    const double t = scale * wanted[i], pad = tilePad(job, c, t);
+    const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
+    sizes[i].w = static_cast<uint32_t>(std::clamp(std::ceil(eu / t), 1.0, double(maxTile)));
+    sizes[i].h = static_cast<uint32_t>(std::clamp(std::ceil(ev / t), 1.0, double(maxTile)));
+    texels += uint64_t(sizes[i].w) * sizes[i].h;
+  }
+  return texels;
+}
+
+// Per cell its texel (job.cellTexel) and tile size: the wanted texels, all coarsened by one
+// factor where the cap (texelCap) asks for it, and what coarsened them recorded and reported.
+std::vector<TileSize> chooseTexels(PackJob& job) {
+  PackSummary& sum = job.sum;
+  const PackOptions& opt = job.opt;
+  const std::vector<double> wanted = wantedTexels(job);
+  const uint64_t cap = texelCap(job);
+  double area = 0;
+  for (size_t i = 0; i < job.cells.size(); ++i) {
+    const WorkCell& c = job.cells[i];
+    const double t = wanted[i], pad = tilePad(job, c, t);
+    area += (c.ext[1] - c.ext[0] + 2 * pad + t) * (c.ext[3] - c.ext[2] + 2 * pad + t) / (t * t);
+  }
+  double scale = opt.texelSize > 0 ? 1.0 : std::max(1.0, std::sqrt(area / double(cap)));
+  std::vector<TileSize> sizes;
+  for (int iter = 0; iter < 40; ++iter) {
+    sum.texels = tileSizes(job, wanted, scale, sizes);
+    if (sum.texels <= cap || opt.texelSize > 0) break;
+    scale *= std::sqrt(double(sum.texels) / double(cap)) * 1.01;
+  }
+  job.cellTexel.resize(wanted.size());
+  for (size_t i = 0; i < wanted.size(); ++i) job.cellTexel[i] = scale * wanted[i];
+  const auto [lo, hi] = std::minmax_element(job.cellTexel.begin(), job.cellTexel.end());
+  sum.texelMin = lo == job.cellTexel.end() ? 0 : *lo;
+  sum.texelMax = hi == job.cellTexel.end() ? 0 : *hi;
+  sum.texelSize = job.texel = median(job.cellTexel);
+  job.texelWanted = median(wanted);
+  if (scale > 1.05) {
+    char msg[96];
+    if (opt.texelBudget) std::snprintf(msg, sizeof msg, "--texels %llu", (unsigned long long)cap);
+    else std::snprintf(msg, sizeof msg, "%llu texels per point", (unsigned long long)kMaxTexelsPerPoint);
+    job.texelCap = msg;
+    char warn[256];
+    std::snprintf(warn, sizeof warn,
+                  "the texel cap (%s) made texels %.2fx coarser than the data's (median %.4g instead of %.4g): "
+                  "detail is lost%s",
+                  msg, scale, job.texel, job.texelWanted, opt.texelBudget ? "; raise --texels" : "; --texels N allows more");
+    sum.warnings.push_back(warn);
+  }
+  return sizes;
+}
+
 void layoutPhase(PackJob& job) {
   PackSummary& sum = job.sum;
   const PackOptions& opt = job.opt;
-  // Point inputs: texels from the area each point stands for (which the nearest-neighbour
-  // spacing underestimates where samples come in lines), and at most kMaxTexelsPerPoint texels
-  // per point, so sparse or elongated scans stay small. Meshes: from the vertex spacing.
-  double t = opt.texelSize > 0 ? opt.texelSize : (job.triangles ? sum.spacing : sum.areaSpacing) * opt.texelPerSpacing;
-  const double wanted = t;
-  const uint64_t budget = job.triangles ? opt.texelBudget
-                                        : std::min<uint64_t>(opt.texelBudget, std::max<uint64_t>(4096, kMaxTexelsPerPoint * job.bounds.count));
-  // Point tiles reach the coverage radius past their points. Triangle tiles hold their
-  // triangles whole (assignPhase grew the extents) plus a texel, and reach the lattice step of
-  // the points sampled on large triangles past those points.
-  const double padUV = job.triangles ? 0.0 : opt.coverageRadius * sum.spacing;
-  double area = 0;
-  for (const WorkCell& c : job.cells)
-    area += (c.ext[1] - c.ext[0] + 2 * padUV + t) * (c.ext[3] - c.ext[2] + 2 * padUV + t);
-  if (opt.texelSize <= 0) t = std::max(t, std::sqrt(area / double(budget)));
-  const uint32_t maxTile = opt.maxPageSize - 2;
-  // Triangle tiles: a texel past their (grown) extents; cells holding points sampled on large
-  // triangles reach the lattice step past them.
-  auto padOf = [&](const WorkCell& c) {
-    return job.triangles ? std::max(t, c.sampled ? job.dist.surfaceSampleStep : 0.0) : padUV;
-  };
-  std::vector<TileSize> sizes(job.cells.size());
-  for (int iter = 0; iter < 40; ++iter) {
-    uint64_t texels = 0;
-    for (size_t i = 0; i < job.cells.size(); ++i) {
-      const WorkCell& c = job.cells[i];
-      const double pad = padOf(c);
-      const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
-      sizes[i].w = static_cast<uint32_t>(std::clamp(std::ceil(eu / t), 1.0, double(maxTile)));
-      sizes[i].h = static_cast<uint32_t>(std::clamp(std::ceil(ev / t), 1.0, double(maxTile)));
-      texels += uint64_t(sizes[i].w) * sizes[i].h;
-    }
-    sum.texels = texels;
-    if (texels <= budget || opt.texelSize > 0) break;
-    t *= std::sqrt(double(texels) / double(budget)) * 1.01;
-  }
-  sum.texelSize = job.texel = t;
-  job.texelWanted = wanted;
-  if (t > 1.05 * wanted) {
-    char cap[96];
-    if (budget == opt.texelBudget) std::snprintf(cap, sizeof cap, "--texels %llu", (unsigned long long)opt.texelBudget);
-    else std::snprintf(cap, sizeof cap, "%llu texels per point", (unsigned long long)kMaxTexelsPerPoint);
-    job.texelCap = cap;
-  }
-  // A budget that coarsened the texel loses detail: say so, and by how much.
-  if (t > 1.05 * wanted && budget == opt.texelBudget) {
-    char msg[256];
-    std::snprintf(msg, sizeof msg,
-                  "the texel budget (--texels %llu) made texels %.2fx coarser than the data's (%.4g instead of %.4g): "
-                  "detail is lost; raise --texels",
-                  (unsigned long long)opt.texelBudget, t / wanted, t, wanted);
-    sum.warnings.push_back(msg);
-  }
+  const std::vector<TileSize> sizes = chooseTexels(job);
   const PackingResult layout = packAtlas(sizes, opt.maxPageSize);
   job.records.resize(job.cells.size());
   for (size_t i = 0; i < job.cells.size(); ++i) {
     WorkCell& c = job.cells[i];
     CellRecord& r = c.rec;
-    const double eu = c.ext[1] - c.ext[0] + 2 * padOf(c), ev = c.ext[3] - c.ext[2] + 2 * padOf(c);
+    const double t = job.cellTexel[i], pad = tilePad(job, c, t);
+    const double eu = c.ext[1] - c.ext[0] + 2 * pad, ev = c.ext[3] - c.ext[2] + 2 * pad;
     // The tile spans the box exactly: widen the box to whole texels, centred on the points.
     const double su = std::max(sizes[i].w * t, eu), sv = std::max(sizes[i].h * t, ev);
     const double cu = (c.ext[0] + c.ext[1]) / 2, cv = (c.ext[2] + c.ext[3]) / 2;
@@ -996,7 +1060,7 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 7;  // 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 8;  // 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,

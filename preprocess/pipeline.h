@@ -15,8 +15,8 @@ namespace sa {
 
 struct PackOptions {
   uint64_t memBudget = uint64_t(1) << 30;     // bytes
-  uint64_t texelBudget = uint64_t(64) << 20;  // texels over all tiles
-  double texelSize = 0;           // world units; 0 = from sample spacing and budget
+  uint64_t texelBudget = 0;       // at most this many texels over all tiles (0: kMaxTexelsPerPoint per point)
+  double texelSize = 0;           // world units, every cell; 0 = per cell from its points' spacing
   double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
   double coverageRadius = 1.5;    // in sample spacings: texels whose surface point is farther stay empty
   double splatRadius = 1.5;       // in sample spacings: the point splat kernel (tangent planes)
@@ -41,7 +41,8 @@ struct PackSummary {
   uint64_t texels = 0, fileBytes = 0;
   uint64_t scratchBytes = 0;     // written to temporary chunk files (compressed)
   uint64_t scratchRawBytes = 0;  // the same records uncompressed
-  double spacing = 0, areaSpacing = 0, texelSize = 0;
+  double spacing = 0, areaSpacing = 0, texelSize = 0;  // texelSize: the median over cells
+  double texelMin = 0, texelMax = 0;                     // the cells' finest and coarsest texels
   double seconds[6] = {0, 0, 0, 0, 0, 0};     // count, distribute, normals+octree, heightmaps, write, total
   double cpuSeconds[6] = {0, 0, 0, 0, 0, 0};  // the same phases' user + system seconds over all threads
   uint32_t ranks = 1;    // processes of a cluster pack (preprocess/cluster.h)
@@ -56,8 +57,12 @@ struct PackSummary {
   std::vector<std::string> warnings;
 };
 
-// Point inputs get at most this many texels per point (a bound on bytes per point).
+// Point inputs get at most this many texels per point unless --texels says otherwise (a bound
+// on bytes per point).
 inline constexpr uint64_t kMaxTexelsPerPoint = 8;
+// A point input's cell takes the texel of its own points' spacing, down to the pack's over this
+// factor (pipeline.cpp, wantedTexels): a bound on what a few odd points can do to one tile.
+inline constexpr double kLocalTexelRefine = 4;
 
 // Bytes of working memory per point while a chunk is processed (records, positions,
 // normals, neighbour grid, tile samples); sets the chunk size from the memory budget.

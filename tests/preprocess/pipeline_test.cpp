@@ -61,7 +61,7 @@ TEST(Pipeline, SpherePackHasHeightFieldCells) {
   EXPECT_GT(checked, 1000u);
   auto warnedAboutBudget = [](const PackSummary& s) {
     for (const std::string& w : s.warnings)
-      if (w.find("texel budget") != std::string::npos) return true;
+      if (w.find("detail is lost") != std::string::npos) return true;
     return false;
   };
   EXPECT_FALSE(warnedAboutBudget(sum));
@@ -421,6 +421,83 @@ TEST(Pipeline, OpenSheetFacesOneWay) {
   EXPECT_TRUE(facing == 0 || away == 0);
   EXPECT_LE(sum.cells, 16u);
   EXPECT_EQ(sum.forcedCells, 0u);
+}
+
+// A sphere whose cap x < -2.5 (a quarter of its area) holds as many points as the rest, as where
+// a statue's face was scanned closer or a survey's flight lines overlap: the pack's spacing is
+// between the two, the cap's cells take the texel of their own points' spacing, finer than the
+// pack's, so they keep their detail; the rest keeps the pack's.
+TEST(Pipeline, TexelsFollowTheLocalSpacing) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> g;
+  size_t dense = 0, sparse = 0;
+  while (dense < 20000 || sparse < 20000) {
+    Eigen::Vector3d n(g(rng), g(rng), g(rng));
+    n.normalize();
+    size_t& count = n.x() < -0.5 ? dense : sparse;
+    if (count >= 20000) continue;
+    ++count;
+    pts.push_back(5 * n);
+    nrm.push_back(n);
+  }
+  test::writePointsPly(d.file("t.ply"), pts, &nrm);
+  auto in = InputSet::open({d.file("t.ply")});
+  ASSERT_TRUE(in.isOk());
+  PackOptions uncapped;
+  uncapped.texelBudget = 64u << 20;
+  PackSummary local;
+  ASSERT_TRUE(packInput(*in, d.file("t.hfa"), uncapped, nullptr, local).isOk());
+  PackReader r;
+  ASSERT_TRUE(r.open(d.file("t.hfa")).isOk());
+  std::vector<double> denseT, sparseT;
+  for (const CellRecord& c : r.cells()) {
+    const Eigen::Vector3d centre = Eigen::Vector3d(c.origin) + Eigen::Vector3d(r.meta().origin);
+    const double t = (c.box[1] - c.box[0]) / c.tileW;
+    EXPECT_NEAR(t, (c.box[3] - c.box[2]) / c.tileH, 1e-6 * t) << "texels are square";
+    if (centre.x() < -2.5) denseT.push_back(t);  // the octants on the cap's side
+    if (centre.x() > 0) sparseT.push_back(t);
+  }
+  ASSERT_GE(denseT.size(), 4u);
+  ASSERT_GE(sparseT.size(), 4u);
+  std::sort(denseT.begin(), denseT.end());
+  std::sort(sparseT.begin(), sparseT.end());
+  const double td = denseT[denseT.size() / 2], ts = sparseT[sparseT.size() / 2];
+  std::printf("local texels: dense %.4f (%zu cells), sparse %.4f (%zu cells), ratio %.2f; pack area spacing %.4f; "
+              "%llu texels for 40000 points, range %.4f-%.4f\n", td, denseT.size(), ts, sparseT.size(), ts / td,
+              local.areaSpacing, (unsigned long long)local.texels, local.texelMin, local.texelMax);
+  // Dense cells: half their own area spacing. Sparse ones: the pack's texel (half the points'
+  // mean area spacing), never coarser.
+  const double denseSpacing = std::sqrt(2 * M_PI * 5 * 2.5 / 20000);  // the side of the area per point
+  EXPECT_NEAR(td, 0.5 * denseSpacing, 0.2 * 0.5 * denseSpacing);
+  EXPECT_DOUBLE_EQ(ts, 0.5 * local.areaSpacing);
+  EXPECT_DOUBLE_EQ(local.texelMax, 0.5 * local.areaSpacing);
+  EXPECT_LT(td, 0.85 * ts);
+  EXPECT_TRUE(std::none_of(local.warnings.begin(), local.warnings.end(),
+                           [](const std::string& w) { return w.find("detail is lost") != std::string::npos; }));
+  // The default: at most kMaxTexelsPerPoint per point, all cells coarsened alike if needed.
+  PackSummary byDefault;
+  ASSERT_TRUE(packInput(*in, d.file("default.hfa"), PackOptions{}, nullptr, byDefault).isOk());
+  EXPECT_LE(byDefault.texels, kMaxTexelsPerPoint * 40000);
+  EXPECT_NEAR(byDefault.texelMax / byDefault.texelMin, local.texelMax / local.texelMin, 0.01 * local.texelMax / local.texelMin);
+  // --texel-size: one texel for every cell.
+  PackOptions one;
+  one.texelSize = 0.04;
+  PackSummary fixed;
+  ASSERT_TRUE(packInput(*in, d.file("f.hfa"), one, nullptr, fixed).isOk());
+  EXPECT_DOUBLE_EQ(fixed.texelMin, 0.04);
+  EXPECT_DOUBLE_EQ(fixed.texelMax, 0.04);
+  // A cap coarsens every cell by the same factor, keeping the dense part finer, and says so.
+  PackOptions capped;
+  capped.texelBudget = local.texels / 4;
+  PackSummary c;
+  ASSERT_TRUE(packInput(*in, d.file("c.hfa"), capped, nullptr, c).isOk());
+  EXPECT_LE(c.texels, capped.texelBudget);
+  EXPECT_GT(c.texelSize, 1.5 * local.texelSize);
+  EXPECT_NEAR(c.texelMax / c.texelMin, local.texelMax / local.texelMin, 0.01 * local.texelMax / local.texelMin);
+  EXPECT_TRUE(std::any_of(c.warnings.begin(), c.warnings.end(),
+                          [](const std::string& w) { return w.find("detail is lost; raise --texels") != std::string::npos; }));
 }
 
 TEST(Pipeline, SparseStripStaysSmall) {
