@@ -10,7 +10,9 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <mutex>
 #include <sstream>
+#include <thread>
 
 namespace sa {
 namespace {
@@ -50,6 +52,29 @@ SectionEntry makeSection(const char* id, uint64_t off, uint64_t size, uint32_t c
   e.crc = crc;
   return e;
 }
+
+// Runs f(i) for i in [0, n) on every core (interleaved: neighbouring cells' tiles differ in size).
+template <class F>
+void parallelFor(size_t n, F f) {
+  const size_t threads = std::clamp<size_t>(std::thread::hardware_concurrency(), 1, 64);
+  std::vector<std::thread> pool;
+  for (size_t t = 1; t < std::min(threads, n); ++t)
+    pool.emplace_back([&, t] {
+      for (size_t i = t; i < n; i += threads) f(i);
+    });
+  for (size_t i = 0; i < n; i += threads) f(i);
+  for (std::thread& th : pool) th.join();
+}
+
+// A page section's compressed form (FORMAT.md): u32 tile count, u32 zero, per tile its blob's
+// offset from the section start and size (u64 each), then the blobs in cell order.
+constexpr size_t kTileIndexHead = 8, kTileIndexEntry = 16;
+
+// A cell's tile with its one-texel gutter.
+TileRegion gutteredTile(const CellRecord& c) { return {c.tileX - 1u, c.tileY - 1u, c.tileW + 2u, c.tileH + 2u}; }
+
+// Raw tile bytes coded per batch: bounds the memory of compressing a pack of any size.
+constexpr uint64_t kCompressBatchBytes = uint64_t(64) << 20;
 
 }  // namespace
 
@@ -148,7 +173,92 @@ Status PackWriter::finish() {
   h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
   SA_RETURN_IF_ERROR(file_.pwriteAll(&h, sizeof(h), 0));
   SA_RETURN_IF_ERROR(file_.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h)));
-  return file_.commit();
+  if (!compress_) return file_.commit();
+  const Status s = finishCompressed(sec);
+  file_.abandon();
+  return s;
+}
+
+// The final file from the finished raw temporary: META, CELL, the page sections coded tile by
+// tile (read back from the temporary in batches, so memory stays bounded), NOTE.
+Status PackWriter::finishCompressed(const std::vector<SectionEntry>& raw) {
+  AtomicFile out;
+  SA_RETURN_IF_ERROR(out.open(file_.path()));
+  std::vector<SectionEntry> sec;
+  uint64_t off = alignUp(sizeof(PackHeader) + raw.size() * sizeof(SectionEntry));
+  for (const SectionEntry& r : raw) {
+    SectionEntry e = r;
+    e.offset = off;
+    const std::string id(r.id, 4);
+    if (id == "HGHT" || id == "NRML" || id == "COLR") {
+      const TexelLayout layout = id == "HGHT" ? kHeightTexels : id == "NRML" ? kNormalTexels : kColorTexels;
+      SA_RETURN_IF_ERROR(writeCompressedSection(out, id == "HGHT" ? "HGTZ" : id == "NRML" ? "NRMZ" : "COLZ", r.offset,
+                                                layout, off, e));
+    } else {
+      std::vector<uint8_t> bytes(r.size);
+      if (r.size && ::pread(file_.fd(), bytes.data(), r.size, off_t(r.offset)) != ssize_t(r.size))
+        return Status::internal(file_.tempPath() + ": cannot read back section " + id);
+      if (r.size) SA_RETURN_IF_ERROR(out.pwriteAll(bytes.data(), r.size, off));
+    }
+    sec.push_back(e);
+    off = alignUp(e.offset + e.size);
+  }
+  PackHeader h{};
+  if (::pread(file_.fd(), &h, sizeof h, 0) != ssize_t(sizeof h)) return Status::internal(file_.tempPath() + ": cannot read back");
+  h.fileSize = off;
+  h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
+  SA_RETURN_IF_ERROR(out.pwriteAll(&h, sizeof(h), 0));
+  SA_RETURN_IF_ERROR(out.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h)));
+  if (::ftruncate(out.fd(), off_t(off)) != 0)
+    return Status::internal(out.tempPath() + ": cannot size the file: " + std::strerror(errno));
+  return out.commit();
+}
+
+// One page section coded (FORMAT.md, "Compressed pages") at `off` of `out`; `entry` gets its
+// id, size and checksum.
+Status PackWriter::writeCompressedSection(AtomicFile& out, const char* id, uint64_t rawOff, TexelLayout layout,
+                                          uint64_t off, SectionEntry& entry) {
+  const uint32_t P = meta_.pageWidth;
+  const uint64_t pageBytes = uint64_t(P) * meta_.pageHeight * layout.texelBytes();
+  std::vector<uint8_t> index(kTileIndexHead + kTileIndexEntry * cells_.size(), 0);
+  const uint32_t count = uint32_t(cells_.size());
+  std::memcpy(index.data(), &count, 4);
+  uint64_t at = index.size();  // from the section start
+  for (size_t first = 0; first < cells_.size();) {
+    size_t last = first;
+    uint64_t bytes = 0;
+    while (last < cells_.size() && (last == first || bytes < kCompressBatchBytes)) {
+      const TileRegion r = gutteredTile(cells_[last++]);
+      bytes += uint64_t(r.w) * r.h * layout.texelBytes();
+    }
+    std::vector<std::vector<uint8_t>> blobs(last - first);
+    std::vector<Status> status(last - first, Status::ok());
+    parallelFor(last - first, [&](size_t k) {
+      const CellRecord& c = cells_[first + k];
+      const TileRegion r = gutteredTile(c);
+      const size_t rowBytes = size_t(r.w) * layout.texelBytes();
+      std::vector<uint8_t> tile(rowBytes * r.h);
+      for (uint32_t j = 0; j < r.h; ++j) {
+        const uint64_t src = rawOff + c.page * pageBytes + ((uint64_t(r.y) + j) * P + r.x) * layout.texelBytes();
+        if (::pread(file_.fd(), tile.data() + j * rowBytes, rowBytes, off_t(src)) != ssize_t(rowBytes)) {
+          status[k] = Status::internal(file_.tempPath() + ": cannot read back a tile");
+          return;
+        }
+      }
+      blobs[k] = encodeTile(tile.data(), r.w, {0, 0, r.w, r.h}, layout);
+    });
+    for (size_t k = 0; k < blobs.size(); ++k) {
+      SA_RETURN_IF_ERROR(status[k]);
+      const uint64_t e[2] = {at, blobs[k].size()};
+      std::memcpy(index.data() + kTileIndexHead + kTileIndexEntry * (first + k), e, sizeof e);
+      SA_RETURN_IF_ERROR(out.pwriteAll(blobs[k].data(), blobs[k].size(), off + at));
+      at += blobs[k].size();
+    }
+    first = last;
+  }
+  SA_RETURN_IF_ERROR(out.pwriteAll(index.data(), index.size(), off));
+  entry = makeSection(id, off, at, crcOfFile(out.fd(), off, at));
+  return Status::ok();
 }
 
 PackReader::~PackReader() {
@@ -161,7 +271,7 @@ const SectionEntry* PackReader::find(const char id[4]) const {
   return nullptr;
 }
 
-Status PackReader::open(const std::string& path) {
+Status PackReader::open(const std::string& path, bool pages) {
   path_ = path;
   int fd = ::open(path.c_str(), O_RDONLY);
   if (fd < 0) return Status::badInput(path + ": cannot open: " + std::strerror(errno));
@@ -212,7 +322,9 @@ Status PackReader::open(const std::string& path) {
   const SectionEntry* meta = find("META");
   const SectionEntry* cell = find("CELL");
   const SectionEntry* hght = find("HGHT");
-  if (!meta || !cell || !hght) return Status::badInput(path + ": missing a required section (META, CELL, HGHT)");
+  const bool compressed = !hght && find("HGTZ");
+  if (!meta || !cell || (!hght && !compressed))
+    return Status::badInput(path + ": missing a required section (META, CELL, HGHT or HGTZ)");
   if (meta->size != sizeof(PackMeta)) return Status::badInput(path + ": META section has the wrong size");
   if (crcOf(base_ + meta->offset, meta->size) != meta->crc)
     return Status::badInput(path + ": META checksum mismatch (file corrupt)");
@@ -228,21 +340,36 @@ Status PackReader::open(const std::string& path) {
       return Status::badInput(path + ": page size " + std::to_string(P) + "x" + std::to_string(PH) +
                               " is not a power of two <= 65536 on each side");
   const uint64_t pageTexels = uint64_t(P) * PH;
-  // pageTexels * pageCount * 4 can pass 2^64 for hostile headers; bound the count by the file first.
-  if (meta_->pageCount > size_ / (pageTexels * 2) || hght->size != pageTexels * meta_->pageCount * 2)
-    return Status::badInput(path + ": HGHT section size does not match page size and count");
-  hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
-  if (meta_->flags & kPackHasNormals) {
-    const SectionEntry* nrml = find("NRML");
-    if (!nrml || nrml->size != pageTexels * meta_->pageCount * kNormalBytes)
-      return Status::badInput(path + ": normal flag set but NRML section missing or of the wrong size");
-    nrml_ = base_ + nrml->offset;
-  }
-  if (meta_->flags & kPackHasColor) {
-    const SectionEntry* colr = find("COLR");
-    if (!colr || colr->size != pageTexels * meta_->pageCount * 4)
-      return Status::badInput(path + ": colour flag set but COLR section missing or of the wrong size");
-    colr_ = base_ + colr->offset;
+  if (compressed) {
+    // Decoded pages take memory the file does not hold: bound them by the cells and the file.
+    const uint64_t perTexel = 2 + ((meta_->flags & kPackHasNormals) ? kNormalBytes : 0) + ((meta_->flags & kPackHasColor) ? 4 : 0);
+    const uint64_t limit = std::max<uint64_t>(uint64_t(256) << 20, 4096 * size_);
+    if (meta_->pageCount > std::max<uint32_t>(1, meta_->cellCount) || meta_->pageCount > limit / (pageTexels * perTexel))
+      return Status::badInput(path + ": " + std::to_string(meta_->pageCount) + " pages of " + std::to_string(P) + "x" +
+                              std::to_string(PH) + " is more than its " + std::to_string(meta_->cellCount) +
+                              " cells and " + std::to_string(size_) + " bytes can hold");
+    for (const char* id : {"NRMZ", "COLZ"}) {
+      const bool wanted = (meta_->flags & (id[0] == 'N' ? kPackHasNormals : kPackHasColor)) != 0;
+      if (wanted && !find(id)) return Status::badInput(path + ": " + (id[0] == 'N' ? "normal" : "colour") +
+                                                         std::string(" flag set but section ") + id + " missing");
+    }
+  } else {
+    // pageTexels * pageCount * 4 can pass 2^64 for hostile headers; bound the count by the file first.
+    if (meta_->pageCount > size_ / (pageTexels * 2) || hght->size != pageTexels * meta_->pageCount * 2)
+      return Status::badInput(path + ": HGHT section size does not match page size and count");
+    hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
+    if (meta_->flags & kPackHasNormals) {
+      const SectionEntry* nrml = find("NRML");
+      if (!nrml || nrml->size != pageTexels * meta_->pageCount * kNormalBytes)
+        return Status::badInput(path + ": normal flag set but NRML section missing or of the wrong size");
+      nrml_ = base_ + nrml->offset;
+    }
+    if (meta_->flags & kPackHasColor) {
+      const SectionEntry* colr = find("COLR");
+      if (!colr || colr->size != pageTexels * meta_->pageCount * 4)
+        return Status::badInput(path + ": colour flag set but COLR section missing or of the wrong size");
+      colr_ = base_ + colr->offset;
+    }
   }
   for (uint32_t i = 0; i < meta_->cellCount; ++i) {
     const CellRecord& c = cells_[i];
@@ -254,7 +381,53 @@ Status PackReader::open(const std::string& path) {
     if (!(c.box[1] >= c.box[0] && c.box[3] >= c.box[2] && c.box[5] >= c.box[4]))
       return Status::badInput(path + ": cell " + std::to_string(i) + " has an inverted box");
   }
+  if (!compressed || !pages) return Status::ok();
+  SA_RETURN_IF_ERROR(decodePages("HGTZ", kHeightTexels, hOwn_));
+  hght_ = reinterpret_cast<const uint16_t*>(hOwn_.data());
+  if (meta_->flags & kPackHasNormals) {
+    SA_RETURN_IF_ERROR(decodePages("NRMZ", kNormalTexels, nOwn_));
+    nrml_ = nOwn_.data();
+  }
+  if (meta_->flags & kPackHasColor) {
+    SA_RETURN_IF_ERROR(decodePages("COLZ", kColorTexels, cOwn_));
+    colr_ = cOwn_.data();
+  }
   return Status::ok();
+}
+
+// Decodes a compressed page section (FORMAT.md) into pages: every cell's tile, on all cores.
+Status PackReader::decodePages(const char id[4], TexelLayout layout, std::vector<uint8_t>& out) const {
+  const std::string name(id, 4);
+  const std::span<const uint8_t> sec = section(id);
+  const uint32_t n = meta_->cellCount;
+  uint32_t count = 0;
+  if (sec.size() >= 4) std::memcpy(&count, sec.data(), 4);
+  if (sec.size() < kTileIndexHead + kTileIndexEntry * uint64_t(n) || count != n)
+    return Status::badInput(path_ + ": section " + name + " does not index the pack's " + std::to_string(n) + " tiles");
+  try {
+    out.assign(pageTexels() * meta_->pageCount * layout.texelBytes(), 0);
+  } catch (const std::bad_alloc&) {
+    return Status::badInput(path_ + ": not enough memory to decode " + name);
+  }
+  std::mutex mu;
+  Status first = Status::ok();
+  uint32_t firstCell = UINT32_MAX;
+  parallelFor(n, [&](size_t i) {
+    uint64_t e[2];
+    std::memcpy(e, sec.data() + kTileIndexHead + kTileIndexEntry * i, sizeof e);
+    const CellRecord& c = cells_[i];
+    uint8_t* page = out.data() + uint64_t(c.page) * pageTexels() * layout.texelBytes();
+    Status s = e[0] > sec.size() || e[1] > sec.size() - e[0]
+                   ? Status::badInput("lies outside the section")
+                   : decodeTile(sec.subspan(e[0], e[1]), page, meta_->pageWidth, gutteredTile(c), layout);
+    if (s) return;
+    std::lock_guard<std::mutex> lock(mu);
+    if (i < firstCell) {
+      firstCell = uint32_t(i);
+      first = Status::badInput(path_ + ": section " + name + ", tile of cell " + std::to_string(i) + ": " + s.message());
+    }
+  });
+  return first;
 }
 
 Status PackReader::verifyPages() const {
@@ -266,7 +439,9 @@ Status PackReader::verifyPages() const {
   return Status::ok();
 }
 
-const uint16_t* PackReader::heightPage(uint32_t page) const { return hght_ + uint64_t(page) * pageTexels(); }
+const uint16_t* PackReader::heightPage(uint32_t page) const {
+  return hght_ ? hght_ + uint64_t(page) * pageTexels() : nullptr;
+}
 
 const uint8_t* PackReader::colorPage(uint32_t page) const {
   return colr_ ? colr_ + uint64_t(page) * pageTexels() * 4 : nullptr;

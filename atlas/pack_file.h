@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "atlas/pack_format.h"
+#include "atlas/tile_codec.h"
 #include "common/error.h"
 #include "common/fileio.h"
 
@@ -42,17 +43,24 @@ class PackWriter {
     meta_ = meta;
     meta_.cellCount = cells;
   }
-  // Computes checksums, writes header, META and CELL, fsyncs and renames into place.
+  // Compressed pages (FORMAT.md): finish() writes HGTZ, NRMZ, COLZ instead of HGHT, NRML, COLR.
+  void setCompressPages(bool on) { compress_ = on; }
+  // Computes checksums, writes header, META and CELL, fsyncs and renames into place (with
+  // compressed pages: codes the finished temporary's tiles into the final file).
   Status finish();
   const std::string& tempPath() const { return file_.tempPath(); }
   const CellRecord& cell(uint32_t i) const { return cells_[i]; }
 
  private:
   void layOut(const PackMeta& meta, std::vector<CellRecord> cells, const std::string& note);
+  Status finishCompressed(const std::vector<SectionEntry>& raw);
+  Status writeCompressedSection(AtomicFile& out, const char* id, uint64_t rawOff, TexelLayout layout, uint64_t off,
+                                SectionEntry& entry);
   AtomicFile file_;
   PackMeta meta_{};
   std::vector<CellRecord> cells_;
   std::string note_;
+  bool compress_ = false;
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
 };
 
@@ -75,8 +83,10 @@ class PackReader {
   PackReader& operator=(const PackReader&) = delete;
 
   // Maps the file and runs the cheap checks: magic, version, sizes, every section inside
-  // the file, META and CELL checksums, cell tiles inside their pages.
-  Status open(const std::string& path);
+  // the file, META and CELL checksums, cell tiles inside their pages. Compressed pages are
+  // decoded into memory (on all cores) unless `pages` is false (then the page accessors
+  // return null: for readers of the metadata only).
+  Status open(const std::string& path, bool pages = true);
   // Checks the checksums of the large sections too (reads every byte).
   Status verifyPages() const;
 
@@ -86,8 +96,10 @@ class PackReader {
   const uint16_t* heightPage(uint32_t page) const;
   const uint8_t* colorPage(uint32_t page) const;   // null when the pack has no colour
   const uint8_t* normalPage(uint32_t page) const;  // null when the pack has no normal pages
-  bool hasColor() const { return colr_ != nullptr; }
-  bool hasNormals() const { return nrml_ != nullptr; }
+  bool hasColor() const { return (meta_->flags & kPackHasColor) != 0; }
+  bool hasNormals() const { return (meta_->flags & kPackHasNormals) != 0; }
+  // Whether the pages are stored compressed (HGTZ; FORMAT.md).
+  bool compressedPages() const { return find("HGTZ") != nullptr; }
   uint64_t pageTexels() const { return uint64_t(meta_->pageWidth) * meta_->pageHeight; }
   // The pack's up axis (unit, world), or zero when unknown.
   Eigen::Vector3d up() const { return Eigen::Vector3d(meta_->up[0], meta_->up[1], meta_->up[2]); }
@@ -113,6 +125,7 @@ class PackReader {
  private:
   friend Status rewritePackWithSections(const PackReader&, const std::string&, const std::vector<ExtraSection>&);
   const SectionEntry* find(const char id[4]) const;
+  Status decodePages(const char id[4], TexelLayout layout, std::vector<uint8_t>& out) const;
   std::string path_;
   const uint8_t* base_ = nullptr;
   uint64_t size_ = 0;
@@ -123,6 +136,7 @@ class PackReader {
   const uint16_t* hght_ = nullptr;
   const uint8_t* colr_ = nullptr;
   const uint8_t* nrml_ = nullptr;
+  std::vector<uint8_t> hOwn_, nOwn_, cOwn_;  // decoded compressed pages
 };
 
 // The source files the pack was made from (its NOTE's "source:" lines) and the --columns spec of

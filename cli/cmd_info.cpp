@@ -37,6 +37,21 @@ TexelNote texelNote(const std::string& note) {
   return t;
 }
 
+// The page sections' stored bytes against their raw size (FORMAT.md, "Compressed pages").
+struct PageBytes {
+  const char* name;
+  uint64_t stored = 0, raw = 0;
+};
+std::vector<PageBytes> pageBytes(const PackReader& pack) {
+  const uint64_t texels = pack.pageTexels() * pack.meta().pageCount;
+  const bool z = pack.compressedPages();
+  std::vector<PageBytes> out;
+  out.push_back({"heights", pack.section(z ? "HGTZ" : "HGHT").size(), texels * 2});
+  if (pack.hasNormals()) out.push_back({"normals", pack.section(z ? "NRMZ" : "NRML").size(), texels * kNormalBytes});
+  if (pack.hasColor()) out.push_back({"colour", pack.section(z ? "COLZ" : "COLR").size(), texels * 4});
+  return out;
+}
+
 struct TexelRange {
   double min = 0, median = 0, max = 0;
 };
@@ -176,7 +191,7 @@ int cmdInfo(int argc, char** argv) {
   if (lowerExtension(a.positionals()[0]) != ".hfa") return infoInputs(a.positionals(), a.get("columns"), a.flag("json"));
   if (a.positionals().size() != 1) return reportError(Status::badInput("info: give exactly one pack (see --help)"));
   PackReader pack;
-  s = pack.open(a.positionals()[0]);
+  s = pack.open(a.positionals()[0], false);  // metadata only: compressed pages stay coded
   if (!s) return reportError(s);
   const PackMeta& m = pack.meta();
   std::map<int, uint32_t> perLevel;
@@ -236,6 +251,14 @@ int cmdInfo(int argc, char** argv) {
     std::string capJson = "null";
     if (!tn.cap.empty()) capJson = '"' + jsonEscape(tn.cap) + '"';
     std::printf(", \"texel_capped_by\": %s", capJson.c_str());
+    std::printf(", \"pages_compressed\": %s, \"page_bytes\": {", pack.compressedPages() ? "true" : "false");
+    first = true;
+    for (const PageBytes& b : pageBytes(pack)) {
+      std::printf("%s\"%s\": {\"stored\": %llu, \"raw\": %llu}", first ? "" : ", ", b.name,
+                  (unsigned long long)b.stored, (unsigned long long)b.raw);
+      first = false;
+    }
+    std::printf("}");
     std::printf(", \"modes\": [");
     bool firstMode = true;
     for (const ModeInfo& mi : allModes()) {
@@ -281,6 +304,18 @@ int cmdInfo(int argc, char** argv) {
     std::printf("detail    full: the texels are the data's (median %.4g: half each cell's area spacing, or --texel-size)\n",
                 tn.wanted);
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
+  std::printf("pages    ");
+  uint64_t stored = 0, raw = 0;
+  for (const PageBytes& b : pageBytes(pack)) {
+    std::printf(" %s %.2f MiB (%.2fx)", b.name, double(b.stored) / 1048576.0, double(b.raw) / double(std::max<uint64_t>(1, b.stored)));
+    stored += b.stored;
+    raw += b.raw;
+  }
+  if (pack.compressedPages())
+    std::printf("; coded per tile, %.2fx smaller than raw pages (%.2f MiB)\n", double(raw) / double(std::max<uint64_t>(1, stored)),
+                double(raw) / 1048576.0);
+  else
+    std::printf("; raw (packed with --raw-pages or before compression)\n");
   std::printf("timings  ");
   if (m.seconds[5] == 0) std::printf(" not recorded (packed with --reproducible)");
   for (int i = 0; i < 6 && m.seconds[5] != 0; ++i)

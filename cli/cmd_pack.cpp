@@ -82,6 +82,8 @@ const char* kHelp =
     "                         gdm (voxel surfels of the forced cells from the sources, and exact's);\n"
     "                         parallax and points need nothing. Later, with a region or a budget:\n"
     "                         scanatlas bake OUT.hfa --mode vdm --clip-box ... | --budget SIZE\n"
+    "  --raw-pages            store the atlas pages uncompressed (larger; mapped in place, no decoding\n"
+    "                         when opened). Default: each tile coded losslessly (prediction + zstd)\n"
     "  --reproducible         no timings in the pack: the same input and options give the same bytes\n"
     "                         (timings stay in the summary)\n"
     "  --json                 print the summary as JSON on stdout\n"
@@ -191,6 +193,7 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
   opt.strict = a.flag("strict");
   opt.force = a.flag("force");
   opt.reproducible = a.flag("reproducible");
+  opt.compressPages = !a.flag("raw-pages");
   opt.scratchParent = a.get("scratch");
   return Status::ok();
 }
@@ -258,7 +261,7 @@ int cmdPack(int argc, char** argv) {
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
                       "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves"},
-                     {"as-points", "strict", "force", "no-smooth", "reproducible", "json", "quiet", "help"},
+                     {"as-points", "strict", "force", "no-smooth", "reproducible", "raw-pages", "json", "quiet", "help"},
                      {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);

@@ -59,6 +59,7 @@ class AtomicFile {
   Status open(const std::string& path);
   int fd() const { return fd_; }
   const std::string& tempPath() const { return tmp_; }
+  const std::string& path() const { return path_; }
   Status pwriteAll(const void* data, size_t n, uint64_t offset);
   Status commit();
   void abandon();

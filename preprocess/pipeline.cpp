@@ -1062,11 +1062,11 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   // packs made by an older build are not mistaken for up to date.
   constexpr int kPipelineRevision = 8;  // 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
-      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u",
+      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
       o.texelPerSpacing, o.coverageRadius, o.splatRadius, o.outlierRatio, int(o.smooth), int(o.asPoints), o.up.x(),
       o.up.y(), o.up.z(), o.octree.maxDepth, o.octree.minSplitPoints, o.octree.maxAngleDeg, o.octree.outlierFraction,
-      o.normalNeighbours, o.maxPageSize);
+      o.normalNeighbours, o.maxPageSize, int(o.compressPages));
   XXH3_64bits_update(st, opts, size_t(n));
   for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);
@@ -1115,7 +1115,7 @@ Status rootPhases(PackJob& job, const std::string& outPath, Clock::time_point tS
   SA_RETURN_IF_ERROR(boundsPhase(job));  // also hashes the points as they are read
   sum.inputHash = combineHash(*setup, job.bounds.contentHash);
   PackReader existing;
-  if (!job.opt.force && std::filesystem::exists(outPath) && existing.open(outPath).isOk() &&
+  if (!job.opt.force && std::filesystem::exists(outPath) && existing.open(outPath, false).isOk() &&
       existing.meta().inputHash == sum.inputHash) {
     summarizeExisting(existing, sum);
     sum.upToDate = true;
@@ -1172,6 +1172,7 @@ Status shareRootPhases(PackJob& job, const Status& s) {
 Status openWriter(const PackJob& job, const std::string& outPath, PackWriter& writer) {
   const std::string note = makeNote(job);
   Status s = Cluster::rank() == 0 ? writer.open(outPath, job.meta, job.records, note) : Status::ok();
+  writer.setCompressPages(job.opt.compressPages);
   SA_RETURN_IF_ERROR(Cluster::agree(s));
   if (!Cluster::distributed()) return Status::ok();
   ByteWriter w;

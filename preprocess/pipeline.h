@@ -26,6 +26,7 @@ struct PackOptions {
   bool strict = false;            // NaN/Inf coordinates are an error instead of skipped
   bool force = false;             // repack even when the output is up to date
   bool reproducible = false;      // no timings in META: the same input and options give the same bytes
+  bool compressPages = true;      // pages coded losslessly per tile (HGTZ, NRMZ, COLZ) instead of raw
   Eigen::Vector3d up = Eigen::Vector3d::Zero();  // zero: from the format's convention or the data
   OctreeParams octree;
   int normalNeighbours = 24;

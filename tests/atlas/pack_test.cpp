@@ -144,6 +144,93 @@ TEST(PackFile, RoundTripsBitExactlyWithGutters) {
   }
 }
 
+// Compressed pages (FORMAT.md): the same pages as the raw pack, byte for byte, whatever the
+// texels (random ones, which do not compress, and smooth ones, which do); a damaged or
+// mis-sized tile is an error naming the file, the section and the cell.
+TEST(PackFile, CompressedPagesDecodeToTheRawPagesAndDamageIsNamed) {
+  test::TempDir d;
+  for (bool smooth : {false, true}) {
+    SmallPack sp = makePack(true, 512, 256);
+    if (smooth)
+      for (size_t i = 0; i < sp.cells.size(); ++i) {
+        const CellRecord& c = sp.cells[i];
+        for (int j = 0; j < c.tileH; ++j)
+          for (int k = 0; k < c.tileW; ++k) {
+            const size_t t = size_t(j) * c.tileW + k;
+            sp.heights[i][t] = (k * 7 + j * 3) % 5 == 0 ? 0 : uint16_t(20000 + 40 * k + 13 * j + (k * j) % 3);
+            for (int b = 0; b < kNormalBytes; ++b) sp.normals[i][t * kNormalBytes + b] = uint8_t(100 + (k + j) / 8 + b);
+            for (int b = 0; b < 4; ++b) sp.rgba[i][t * 4 + b] = uint8_t(b == 3 ? 255 : 60 + b * 20 + k / 4);
+          }
+      }
+    std::vector<uint64_t> sizes;
+    for (bool compress : {false, true}) {
+      PackWriter w;
+      w.setCompressPages(compress);
+      const std::string path = d.file(compress ? "z.hfa" : "raw.hfa");
+      ASSERT_TRUE(w.open(path, sp.meta, sp.cells, "note").isOk());
+      for (uint32_t i = 0; i < sp.cells.size(); ++i)
+        ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), sp.normals[i].data(), sp.rgba[i].data()).isOk());
+      ASSERT_TRUE(w.finish().isOk());
+      EXPECT_FALSE(std::filesystem::exists(w.tempPath())) << "the raw temporary is gone";
+      sizes.push_back(std::filesystem::file_size(path));
+    }
+    PackReader raw, z;
+    ASSERT_TRUE(raw.open(d.file("raw.hfa")).isOk());
+    Status s = z.open(d.file("z.hfa"));
+    ASSERT_TRUE(s.isOk()) << s.message();
+    ASSERT_TRUE(z.verifyPages().isOk());
+    EXPECT_FALSE(raw.compressedPages());
+    EXPECT_TRUE(z.compressedPages());
+    EXPECT_TRUE(z.section("HGHT").empty());
+    EXPECT_EQ(z.note(), "note");
+    const uint64_t P = raw.pageTexels();
+    for (uint32_t p = 0; p < raw.meta().pageCount; ++p) {
+      ASSERT_EQ(std::memcmp(raw.heightPage(p), z.heightPage(p), P * 2), 0) << "page " << p;
+      ASSERT_EQ(std::memcmp(raw.normalPage(p), z.normalPage(p), P * kNormalBytes), 0) << "page " << p;
+      ASSERT_EQ(std::memcmp(raw.colorPage(p), z.colorPage(p), P * 4), 0) << "page " << p;
+    }
+    std::printf("%s texels: raw pack %llu bytes, compressed %llu (%.2fx)\n", smooth ? "smooth" : "random",
+                (unsigned long long)sizes[0], (unsigned long long)sizes[1], double(sizes[0]) / double(sizes[1]));
+    if (smooth) {
+      EXPECT_GT(double(sizes[0]) / double(sizes[1]), 4.0);
+    }
+    // Metadata only: no pages decoded.
+    PackReader meta;
+    ASSERT_TRUE(meta.open(d.file("z.hfa"), false).isOk());
+    EXPECT_EQ(meta.heightPage(0), nullptr);
+    EXPECT_TRUE(meta.hasColor());
+  }
+  // Damage inside the HGTZ section's first tile: named, with its cell.
+  const std::string path = d.file("z.hfa");
+  PackReader z;
+  ASSERT_TRUE(z.open(path).isOk());
+  uint64_t off = 0;
+  for (const SectionEntry& e : z.sectionTable())
+    if (std::memcmp(e.id, "HGTZ", 4) == 0) off = e.offset;
+  ASSERT_GT(off, 0u);
+  uint64_t first[2];
+  std::memcpy(first, z.section("HGTZ").data() + 8, sizeof first);
+  std::vector<char> bytes(std::filesystem::file_size(path));
+  std::ifstream(path, std::ios::binary).read(bytes.data(), std::streamsize(bytes.size()));
+  auto openDamaged = [&](uint64_t at, char value) {
+    std::vector<char> b = bytes;
+    b[at] = value;
+    const std::string p = d.file("damaged.hfa");
+    std::ofstream(p, std::ios::binary | std::ios::trunc).write(b.data(), std::streamsize(b.size()));
+    PackReader r;
+    return r.open(p);
+  };
+  Status s = openDamaged(off + first[0] + 1, char(bytes[off + first[0] + 1] ^ 0x5a));  // the zstd frame's header
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("damaged.hfa: section HGTZ, tile of cell 0"), std::string::npos) << s.message();
+  s = openDamaged(off, char(bytes[off] + 1));  // the tile count
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("does not index"), std::string::npos) << s.message();
+  s = openDamaged(off + 8 + 7, char(0x40));  // the first tile's offset far outside the section
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("lies outside the section"), std::string::npos) << s.message();
+}
+
 TEST(PackFile, HeaderBytesMatchTheSpec) {
   test::TempDir d;
   SmallPack sp = makePack(false);
