@@ -8,7 +8,7 @@
 namespace sa {
 namespace {
 
-constexpr int kZstdLevel = 3;
+constexpr int kZstdLevel = 1;
 
 // LOCO-I's median edge detector: a left, b up, c up-left.
 inline uint32_t predict(uint32_t a, uint32_t b, uint32_t c) {
