@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <mutex>
 #include <sstream>
@@ -69,9 +70,6 @@ void parallelFor(size_t n, F f) {
 // A page section's compressed form (FORMAT.md): u32 tile count, u32 zero, per tile its blob's
 // offset from the section start and size (u64 each), then the blobs in cell order.
 constexpr size_t kTileIndexHead = 8, kTileIndexEntry = 16;
-
-// A cell's tile with its one-texel gutter.
-TileRegion gutteredTile(const CellRecord& c) { return {c.tileX - 1u, c.tileY - 1u, c.tileW + 2u, c.tileH + 2u}; }
 
 // Raw tile bytes coded per batch: bounds the memory of compressing a pack of any size.
 constexpr uint64_t kCompressBatchBytes = uint64_t(64) << 20;
@@ -271,7 +269,9 @@ const SectionEntry* PackReader::find(const char id[4]) const {
   return nullptr;
 }
 
-Status PackReader::open(const std::string& path, bool pages) {
+TileRegion gutteredTile(const CellRecord& c) { return {c.tileX - 1u, c.tileY - 1u, c.tileW + 2u, c.tileH + 2u}; }
+
+Status PackReader::open(const std::string& path, PageLoad pages) {
   path_ = path;
   int fd = ::open(path.c_str(), O_RDONLY);
   if (fd < 0) return Status::badInput(path + ": cannot open: " + std::strerror(errno));
@@ -381,50 +381,92 @@ Status PackReader::open(const std::string& path, bool pages) {
     if (!(c.box[1] >= c.box[0] && c.box[3] >= c.box[2] && c.box[5] >= c.box[4]))
       return Status::badInput(path + ": cell " + std::to_string(i) + " has an inverted box");
   }
-  if (!compressed || !pages) return Status::ok();
-  SA_RETURN_IF_ERROR(decodePages("HGTZ", kHeightTexels, hOwn_));
-  hght_ = reinterpret_cast<const uint16_t*>(hOwn_.data());
-  if (meta_->flags & kPackHasNormals) {
-    SA_RETURN_IF_ERROR(decodePages("NRMZ", kNormalTexels, nOwn_));
-    nrml_ = nOwn_.data();
+  if (!compressed || pages == PageLoad::kNone) return Status::ok();
+  SA_RETURN_IF_ERROR(reservePages());
+  if (pages == PageLoad::kOnDemand) {
+    onDemand_ = true;
+    return Status::ok();
   }
-  if (meta_->flags & kPackHasColor) {
-    SA_RETURN_IF_ERROR(decodePages("COLZ", kColorTexels, cOwn_));
-    colr_ = cOwn_.data();
-  }
+  SA_RETURN_IF_ERROR(decodePages("HGTZ", kHeightTexels, hOwn_.data));
+  if (nrml_) SA_RETURN_IF_ERROR(decodePages("NRMZ", kNormalTexels, nOwn_.data));
+  if (colr_) SA_RETURN_IF_ERROR(decodePages("COLZ", kColorTexels, cOwn_.data));
   return Status::ok();
 }
 
-// Decodes a compressed page section (FORMAT.md) into pages: every cell's tile, on all cores.
-Status PackReader::decodePages(const char id[4], TexelLayout layout, std::vector<uint8_t>& out) const {
-  const std::string name(id, 4);
-  const std::span<const uint8_t> sec = section(id);
+PackReader::OwnedPages::~OwnedPages() { std::free(data); }
+
+Status PackReader::OwnedPages::allocate(uint64_t bytes) {
+  std::free(data);
+  data = bytes <= SIZE_MAX ? static_cast<uint8_t*>(std::calloc(size_t(std::max<uint64_t>(bytes, 1)), 1)) : nullptr;
+  return data ? Status::ok() : Status::badInput("not enough memory");
+}
+
+// Memory for the decoded pages of every compressed section, after checking that each indexes
+// the pack's tiles.
+Status PackReader::reservePages() {
   const uint32_t n = meta_->cellCount;
-  uint32_t count = 0;
-  if (sec.size() >= 4) std::memcpy(&count, sec.data(), 4);
-  if (sec.size() < kTileIndexHead + kTileIndexEntry * uint64_t(n) || count != n)
-    return Status::badInput(path_ + ": section " + name + " does not index the pack's " + std::to_string(n) + " tiles");
-  try {
-    out.assign(pageTexels() * meta_->pageCount * layout.texelBytes(), 0);
-  } catch (const std::bad_alloc&) {
-    return Status::badInput(path_ + ": not enough memory to decode " + name);
+  struct Sec {
+    const char* id;
+    TexelLayout layout;
+    OwnedPages* own;
+    bool wanted;
+  };
+  const Sec secs[] = {{"HGTZ", kHeightTexels, &hOwn_, true},
+                      {"NRMZ", kNormalTexels, &nOwn_, (meta_->flags & kPackHasNormals) != 0},
+                      {"COLZ", kColorTexels, &cOwn_, (meta_->flags & kPackHasColor) != 0}};
+  for (const Sec& x : secs) {
+    if (!x.wanted) continue;
+    const std::span<const uint8_t> sec = section(x.id);
+    uint32_t count = 0;
+    if (sec.size() >= 4) std::memcpy(&count, sec.data(), 4);
+    if (sec.size() < kTileIndexHead + kTileIndexEntry * uint64_t(n) || count != n)
+      return Status::badInput(path_ + ": section " + x.id + " does not index the pack's " + std::to_string(n) + " tiles");
+    if (!x.own->allocate(pageTexels() * meta_->pageCount * x.layout.texelBytes()))
+      return Status::badInput(path_ + ": not enough memory to decode " + x.id);
   }
+  hght_ = reinterpret_cast<const uint16_t*>(hOwn_.data);
+  nrml_ = nOwn_.data;
+  colr_ = cOwn_.data;
+  return Status::ok();
+}
+
+// Decodes cell i's tile of a compressed section (its index checked by reservePages) into `pages`.
+Status PackReader::decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const {
+  const std::span<const uint8_t> sec = section(id);
+  uint64_t e[2];
+  std::memcpy(e, sec.data() + kTileIndexHead + kTileIndexEntry * uint64_t(i), sizeof e);
+  const CellRecord& c = cells_[i];
+  uint8_t* page = pages + uint64_t(c.page) * pageTexels() * layout.texelBytes();
+  Status s = e[0] > sec.size() || e[1] > sec.size() - e[0]
+                 ? Status::badInput("lies outside the section")
+                 : decodeTile(sec.subspan(e[0], e[1]), page, meta_->pageWidth, gutteredTile(c), layout);
+  if (s) return s;
+  return Status::badInput(path_ + ": section " + std::string(id, 4) + ", tile of cell " + std::to_string(i) + ": " +
+                          s.message());
+}
+
+Status PackReader::decodeCell(uint32_t i) const {
+  if (!onDemand_) return Status::ok();
+  if (i >= meta_->cellCount) return Status::internal(path_ + ": decodeCell(" + std::to_string(i) + ") past the cells");
+  SA_RETURN_IF_ERROR(decodeTileOf("HGTZ", kHeightTexels, hOwn_.data, i));
+  if (nrml_) SA_RETURN_IF_ERROR(decodeTileOf("NRMZ", kNormalTexels, nOwn_.data, i));
+  if (colr_) SA_RETURN_IF_ERROR(decodeTileOf("COLZ", kColorTexels, cOwn_.data, i));
+  return Status::ok();
+}
+
+// Decodes every cell's tile of a compressed section into `pages`, on all cores; the error of the
+// lowest failing cell.
+Status PackReader::decodePages(const char id[4], TexelLayout layout, uint8_t* pages) const {
   std::mutex mu;
   Status first = Status::ok();
   uint32_t firstCell = UINT32_MAX;
-  parallelFor(n, [&](size_t i) {
-    uint64_t e[2];
-    std::memcpy(e, sec.data() + kTileIndexHead + kTileIndexEntry * i, sizeof e);
-    const CellRecord& c = cells_[i];
-    uint8_t* page = out.data() + uint64_t(c.page) * pageTexels() * layout.texelBytes();
-    Status s = e[0] > sec.size() || e[1] > sec.size() - e[0]
-                   ? Status::badInput("lies outside the section")
-                   : decodeTile(sec.subspan(e[0], e[1]), page, meta_->pageWidth, gutteredTile(c), layout);
+  parallelFor(meta_->cellCount, [&](size_t i) {
+    Status s = decodeTileOf(id, layout, pages, uint32_t(i));
     if (s) return;
     std::lock_guard<std::mutex> lock(mu);
     if (i < firstCell) {
       firstCell = uint32_t(i);
-      first = Status::badInput(path_ + ": section " + name + ", tile of cell " + std::to_string(i) + ": " + s.message());
+      first = s;
     }
   });
   return first;

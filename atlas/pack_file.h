@@ -64,6 +64,9 @@ class PackWriter {
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
 };
 
+// A cell's tile with its one-texel gutter: what a page holds of it.
+TileRegion gutteredTile(const CellRecord& c);
+
 // An optional section to add to a pack (a mode's bake, FORMAT.md).
 struct ExtraSection {
   char id[4];
@@ -75,6 +78,13 @@ class PackReader;
 // those `add` replaces, then `add`. Nothing else changes, so the pack's hash stays valid.
 Status rewritePackWithSections(const PackReader& in, const std::string& out, const std::vector<ExtraSection>& add);
 
+// What PackReader::open does with compressed pages (raw pages are mapped in place either way).
+enum class PageLoad {
+  kAll,       // decode every tile at open, on all cores
+  kNone,      // metadata only: the page accessors return null
+  kOnDemand,  // page memory reserved (untouched until written), each cell's tile decoded by decodeCell
+};
+
 class PackReader {
  public:
   PackReader() = default;
@@ -84,9 +94,14 @@ class PackReader {
 
   // Maps the file and runs the cheap checks: magic, version, sizes, every section inside
   // the file, META and CELL checksums, cell tiles inside their pages. Compressed pages are
-  // decoded into memory (on all cores) unless `pages` is false (then the page accessors
-  // return null: for readers of the metadata only).
-  Status open(const std::string& path, bool pages = true);
+  // decoded as `pages` says.
+  Status open(const std::string& path, PageLoad pages = PageLoad::kAll);
+  // PageLoad::kOnDemand: decodes cell i's tile (with its gutter) into its page; until then the
+  // tile's texels are zero. Thread-safe for different cells; a no-op when the pages are raw or
+  // already decoded. An error names the file, the section and the cell.
+  Status decodeCell(uint32_t i) const;
+  // Whether tiles wait for decodeCell (compressed pages opened with PageLoad::kOnDemand).
+  bool onDemand() const { return onDemand_; }
   // Checks the checksums of the large sections too (reads every byte).
   Status verifyPages() const;
 
@@ -125,7 +140,18 @@ class PackReader {
  private:
   friend Status rewritePackWithSections(const PackReader&, const std::string&, const std::vector<ExtraSection>&);
   const SectionEntry* find(const char id[4]) const;
-  Status decodePages(const char id[4], TexelLayout layout, std::vector<uint8_t>& out) const;
+  // Page memory for decoded sections: calloc'd, so the OS commits only what tiles are written to.
+  struct OwnedPages {
+    uint8_t* data = nullptr;
+    OwnedPages() = default;
+    OwnedPages(const OwnedPages&) = delete;
+    OwnedPages& operator=(const OwnedPages&) = delete;
+    ~OwnedPages();
+    Status allocate(uint64_t bytes);
+  };
+  Status reservePages();
+  Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const;
+  Status decodePages(const char id[4], TexelLayout layout, uint8_t* pages) const;
   std::string path_;
   const uint8_t* base_ = nullptr;
   uint64_t size_ = 0;
@@ -136,7 +162,8 @@ class PackReader {
   const uint16_t* hght_ = nullptr;
   const uint8_t* colr_ = nullptr;
   const uint8_t* nrml_ = nullptr;
-  std::vector<uint8_t> hOwn_, nOwn_, cOwn_;  // decoded compressed pages
+  OwnedPages hOwn_, nOwn_, cOwn_;  // decoded compressed pages
+  bool onDemand_ = false;
 };
 
 // The source files the pack was made from (its NOTE's "source:" lines) and the --columns spec of

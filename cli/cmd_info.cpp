@@ -191,7 +191,7 @@ int cmdInfo(int argc, char** argv) {
   if (lowerExtension(a.positionals()[0]) != ".hfa") return infoInputs(a.positionals(), a.get("columns"), a.flag("json"));
   if (a.positionals().size() != 1) return reportError(Status::badInput("info: give exactly one pack (see --help)"));
   PackReader pack;
-  s = pack.open(a.positionals()[0], false);  // metadata only: compressed pages stay coded
+  s = pack.open(a.positionals()[0], PageLoad::kNone);  // metadata only: compressed pages stay coded
   if (!s) return reportError(s);
   const PackMeta& m = pack.meta();
   std::map<int, uint32_t> perLevel;

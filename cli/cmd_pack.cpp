@@ -94,7 +94,7 @@ const char* kHelp =
 // Grooves given in a file are baked again whenever given (the file may have been edited).
 Status bakeMissingModes(const std::string& path, const std::vector<RenderMode>& modes, const BakeRequest& req, bool quiet) {
   PackReader pack;
-  SA_RETURN_IF_ERROR(pack.open(path, false));  // which sections are there: no pages decoded
+  SA_RETURN_IF_ERROR(pack.open(path, PageLoad::kNone));  // which sections are there: no pages decoded
   std::vector<RenderMode> missing;
   for (RenderMode m : modes) {
     const ModeSection ms = modeSection(pack, m);

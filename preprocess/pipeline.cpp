@@ -1115,7 +1115,7 @@ Status rootPhases(PackJob& job, const std::string& outPath, Clock::time_point tS
   SA_RETURN_IF_ERROR(boundsPhase(job));  // also hashes the points as they are read
   sum.inputHash = combineHash(*setup, job.bounds.contentHash);
   PackReader existing;
-  if (!job.opt.force && std::filesystem::exists(outPath) && existing.open(outPath, false).isOk() &&
+  if (!job.opt.force && std::filesystem::exists(outPath) && existing.open(outPath, PageLoad::kNone).isOk() &&
       existing.meta().inputHash == sum.inputHash) {
     summarizeExisting(existing, sum);
     sum.upToDate = true;

@@ -14,7 +14,6 @@ CellCuller::CellCuller(std::span<const CellRecord> cells) {
     b.v = Eigen::Vector3d(c.v);
     b.w = Eigen::Vector3d(c.w);
     std::copy(c.box, c.box + 6, b.box);
-    b.page = c.page;
     const double cu = (c.box[0] + c.box[1]) / 2, cv = (c.box[2] + c.box[3]) / 2, cw = (c.box[4] + c.box[5]) / 2;
     b.center = b.origin + b.u * cu + b.v * cv + b.w * cw;
     b.radius = 0.5 * std::sqrt(std::pow(c.box[1] - c.box[0], 2) + std::pow(c.box[3] - c.box[2], 2) +
@@ -29,6 +28,7 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
   out.inside.clear();
   out.splats.clear();
   out.sliced.clear();
+  out.missing.clear();
   out.submitted = static_cast<uint32_t>(bounds_.size());
   out.culled = 0;
   const Eigen::Vector3d f = cam.forward(), r = cam.right(), u = cam.trueUp();
@@ -38,10 +38,6 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
   std::vector<double> depthOf(opt.frontToBack ? bounds_.size() : 0);
   for (uint32_t i = 0; i < bounds_.size(); ++i) {
     const Bounds& b = bounds_[i];
-    if (opt.pageResident && !opt.pageResident[b.page]) {
-      ++out.culled;
-      continue;
-    }
     if (opt.clipBox) {
       const Eigen::Vector3d nearest = b.center.cwiseMax(opt.clipLo).cwiseMin(opt.clipHi);
       if ((nearest - b.center).norm() > b.radius) {
@@ -81,7 +77,10 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
       item.steps = static_cast<uint32_t>(std::clamp(std::ceil(want), double(opt.minSteps), double(opt.maxSteps)));
     }
     if (opt.frontToBack) depthOf[i] = z;
-    if (!inside && opt.subpixelSplats && px < opt.splatPixels) {
+    if (opt.cellResident && !opt.cellResident[i]) {
+      out.missing.push_back(i);
+      ++out.culled;
+    } else if (!inside && opt.subpixelSplats && px < opt.splatPixels) {
       out.splats.push_back(item);
     } else if (!inside && px < opt.slicePixels) {
       out.sliced.push_back(item);
@@ -96,6 +95,7 @@ void CellCuller::compute(const Camera& cam, const Eigen::Vector3d& eye, double n
     std::sort(out.front.begin(), out.front.end(), byDepth);
     std::sort(out.inside.begin(), out.inside.end(), byDepth);
     std::sort(out.sliced.begin(), out.sliced.end(), byDepth);
+    std::sort(out.missing.begin(), out.missing.end(), [&](uint32_t a, uint32_t b) { return depthOf[a] < depthOf[b]; });
   }
 }
 

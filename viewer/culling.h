@@ -36,9 +36,9 @@ struct CullOptions {
   Eigen::Vector3d clipLo = Eigen::Vector3d::Zero(), clipHi = Eigen::Vector3d::Zero();
   bool clipPlane = false;
   Eigen::Vector3d planePoint = Eigen::Vector3d::Zero(), planeNormal = Eigen::Vector3d::UnitZ();
-  // Pages still streaming to the GPU: cells on a page with pageResident[page] == 0 are
-  // skipped this frame (null: every page is resident).
-  const uint8_t* pageResident = nullptr;
+  // Tiles still streaming to the GPU: a cell with cellResident[cell] == 0 is not drawn this
+  // frame but listed in VisibleSet::missing (null: every cell is resident).
+  const uint8_t* cellResident = nullptr;
 };
 
 struct DrawItem {
@@ -52,6 +52,7 @@ struct VisibleSet {
   std::vector<DrawItem> inside;  // camera inside (or touching) the box: back faces
   std::vector<DrawItem> splats;  // sub-pixel boxes
   std::vector<DrawItem> sliced;  // --mode auto: boxes under CullOptions::slicePixels, drawn as slices
+  std::vector<uint32_t> missing; // visible cells whose tiles are not resident (CullOptions::cellResident), nearest first
   uint32_t submitted = 0, culled = 0;
 };
 
@@ -67,7 +68,6 @@ class CellCuller {
     Eigen::Vector3d center, origin, u, v, w;
     double radius;
     double box[6];
-    uint32_t page;
   };
   std::vector<Bounds> bounds_;
 };

@@ -4,6 +4,7 @@
 #include "modes/gdm/gdm.h"
 #include "modes/grooves/groove_cast.h"
 #include "modes/vdm/vdm.h"
+#include "viewer/tile_streamer.h"
 
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
@@ -127,9 +128,13 @@ struct Renderer::Gl {
   GLuint grooveEntryBuf = 0, grooveWordBuf = 0;      // grooves: per-cell block offsets, profiles and blocks
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
-  const PackReader* pack = nullptr;   // for streamed pages
-  std::vector<uint8_t> resident;      // per page
-  uint32_t nextPage = 0;
+  // Streamed packs: the decoder, the cells decoded and waiting for upload, residency per cell.
+  const PackReader* pack = nullptr;
+  std::unique_ptr<TileStreamer> streamer;
+  std::vector<uint32_t> uploadQueue;
+  std::vector<uint8_t> resident;
+  uint32_t residentCount = 0;
+  std::string streamError;
   void releaseTargets() {
     GLuint fbos[] = {fbo, postFbo};
     glDeleteFramebuffers(2, fbos);
@@ -171,7 +176,17 @@ Renderer::~Renderer() = default;
 
 double Renderer::nearPlane() const { return std::max((boundsMax_ - boundsMin_).norm() / 2, 1e-12) * 1e-5; }
 
-bool Renderer::pagesPending() const { return gl_ && gl_->nextPage < gl_->resident.size(); }
+bool Renderer::tilesPending() const { return gl_ && gl_->streamer != nullptr; }
+
+uint32_t Renderer::tilesResident() const { return !gl_ ? 0 : gl_->streamer ? gl_->residentCount : cellCount_; }
+
+std::string Renderer::streamError() const {
+  if (gl_ && gl_->streamer && gl_->streamError.empty()) {
+    Status s = gl_->streamer->error();
+    if (!s) gl_->streamError = s.message();
+  }
+  return gl_ ? gl_->streamError : std::string();
+}
 
 Status Renderer::init(const PackReader& pack, bool streamPages) {
   gl_ = std::make_unique<Gl>();
@@ -254,15 +269,17 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   g.heightTex = pages(GL_R16UI, true, nullptr, 0, 2);
   g.pageColorTex = pages(GL_RGBA8, hasColor_, white, GL_RGBA, 4);
   g.normalTex = pages(kNormalBytes == 2 ? GL_RG8 : GL_RG16, hasNormals_, up, GL_RG, kNormalBytes);
-  g.pack = &pack;
-  g.resident.assign(m.pageCount, 0);
-  g.nextPage = 0;
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
-  if (!streamPages) {
-    uploadPages(UINT64_MAX);
-    g.pack = nullptr;
-    if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
+  if (streamPages) {
+    g.pack = &pack;
+    g.resident.assign(m.cellCount, 0);
+    g.residentCount = 0;
+    g.streamer = std::make_unique<TileStreamer>(pack);
+    return Status::ok();
   }
+  if (pack.onDemand()) return Status::internal(pack.path() + ": pages opened on demand must be streamed");
+  uploadPages(pack);
+  if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   return Status::ok();
 }
 
@@ -413,27 +430,66 @@ void Renderer::readCounters(WorkCounters& w) {
   w.percentiles();
 }
 
-void Renderer::uploadPages(uint64_t budgetBytes) {
+// Every page of a pack whose pages are all in memory (raw, or decoded at open).
+void Renderer::uploadPages(const PackReader& pack) {
   Gl& g = *gl_;
-  if (!g.pack) return;
-  const PackMeta& m = g.pack->meta();
+  const PackMeta& m = pack.meta();
   const GLsizei PW = GLsizei(m.pageWidth), PH = GLsizei(m.pageHeight);
-  const uint64_t pageBytes = g.pack->pageTexels() * (2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0));
-  uint64_t spent = 0;
-  // At least one page per call, then as many as the budget allows.
-  while (g.nextPage < m.pageCount && (spent == 0 || spent + pageBytes <= budgetBytes)) {
-    const uint32_t p = g.nextPage++;
-    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, g.pack->heightPage(p));
+  for (uint32_t p = 0; p < m.pageCount; ++p) {
+    glTextureSubImage3D(g.heightTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, pack.heightPage(p));
     if (hasColor_)
-      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RGBA, GL_UNSIGNED_BYTE, g.pack->colorPage(p));
-    if (hasNormals_) {
+      glTextureSubImage3D(g.pageColorTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RGBA, GL_UNSIGNED_BYTE, pack.colorPage(p));
+    if (hasNormals_)
       glTextureSubImage3D(g.normalTex, 0, 0, 0, GLint(p), PW, PH, 1, GL_RG, kNormalBytes == 2 ? GL_UNSIGNED_BYTE : GL_UNSIGNED_SHORT,
-                          g.pack->normalPage(p));
-    }
-    g.resident[p] = 1;
-    spent += pageBytes;
+                          pack.normalPage(p));
   }
-  if (g.nextPage >= m.pageCount) g.pack = nullptr;
+}
+
+// Streamed packs: uploads the tiles decoded since the last frame, up to budgetBytes (at least
+// one tile), each with its gutter; when every cell is resident, streaming ends.
+void Renderer::uploadTiles(uint64_t budgetBytes) {
+  Gl& g = *gl_;
+  if (!g.streamer) return;
+  const std::vector<uint32_t> fresh = g.streamer->takeDecoded();
+  g.uploadQueue.insert(g.uploadQueue.end(), fresh.begin(), fresh.end());
+  const PackReader& pack = *g.pack;
+  const uint32_t PW = pack.meta().pageWidth;
+  const uint64_t texelBytes = 2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(PW));
+  uint64_t spent = 0;
+  size_t k = 0;
+  for (; k < g.uploadQueue.size() && (spent == 0 || spent < budgetBytes); ++k) {
+    const uint32_t i = g.uploadQueue[k];
+    const CellRecord& c = pack.cells()[i];
+    const TileRegion r = gutteredTile(c);
+    const uint64_t at = uint64_t(r.y) * PW + r.x;
+    const GLint x = GLint(r.x), y = GLint(r.y), z = GLint(c.page);
+    const GLsizei w = GLsizei(r.w), h = GLsizei(r.h);
+    glTextureSubImage3D(g.heightTex, 0, x, y, z, w, h, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, pack.heightPage(c.page) + at);
+    if (hasColor_)
+      glTextureSubImage3D(g.pageColorTex, 0, x, y, z, w, h, 1, GL_RGBA, GL_UNSIGNED_BYTE, pack.colorPage(c.page) + 4 * at);
+    if (hasNormals_)
+      glTextureSubImage3D(g.normalTex, 0, x, y, z, w, h, 1, GL_RG, kNormalBytes == 2 ? GL_UNSIGNED_BYTE : GL_UNSIGNED_SHORT,
+                          pack.normalPage(c.page) + kNormalBytes * at);
+    if (!g.resident[i]) ++g.residentCount;
+    g.resident[i] = 1;
+    spent += uint64_t(r.w) * r.h * texelBytes;
+  }
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  g.uploadQueue.erase(g.uploadQueue.begin(), g.uploadQueue.begin() + ptrdiff_t(k));
+  if (g.residentCount == cellCount_ && g.streamer->done()) {
+    streamError();  // keep the decoder's error, if any, past its end
+    g.streamer.reset();
+    g.pack = nullptr;
+    g.resident.clear();
+  }
+}
+
+void Renderer::waitForTiles() {
+  Gl& g = *gl_;
+  if (!g.streamer) return;
+  g.streamer->waitAll();
+  uploadTiles(UINT64_MAX);
 }
 
 Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing) {
@@ -517,7 +573,7 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   co.planePoint = s.clip.point - origin_;
   co.planeNormal = s.clip.normal.normalized();
   co.maxSteps = std::max(1, s.iterations);
-  co.pageResident = pagesPending() ? g.resident.data() : nullptr;
+  co.cellResident = g.streamer ? g.resident.data() : nullptr;
   co.minSteps = std::min(co.minSteps, co.maxSteps);
   co.slicePixels = s.mode == RenderMode::kAuto ? s.autoPixels : 0;
   culler_->compute(cam, camRel, np, co, vis);
@@ -527,6 +583,7 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   st.inside = static_cast<uint32_t>(vis.inside.size());
   st.splats = static_cast<uint32_t>(vis.splats.size());
   st.sliced = static_cast<uint32_t>(vis.sliced.size());
+  st.missing = static_cast<uint32_t>(vis.missing.size());
   // grooves: the boxes of cells with grooves apart, by the program that draws them.
   for (auto& l : grooveLists_) l.clear();
   if (s.mode == RenderMode::kGrooves && !grooveKind_.empty()) {
@@ -781,7 +838,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   glNamedFramebufferDrawBuffers(g.fbo, 4, bufs);
 
   const auto t0 = std::chrono::steady_clock::now();
-  uploadPages(uint64_t(64) << 20);  // streamed packs: 64 MiB of pages per frame
+  uploadTiles(uint64_t(64) << 20);  // streamed packs: up to 64 MiB of tiles a frame
   const Eigen::Vector3d camRel = cam.eye - origin_;  // the camera relative to the pack origin, in double
   const double np = nearPlane();
   FrameStats& st = out.stats;
@@ -791,6 +848,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   const bool surface = s.mode != RenderMode::kPoints;
   VisibleSet vis;
   if (surface) uploadVisibility(cam, camRel, np, s, vis, st);
+  if (surface && g.streamer) g.streamer->want(vis.missing);  // the visible cells it lacks, nearest first
   if (surface && s.countWork) glClearNamedBufferData(g.counterBuf, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, nullptr);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, g.counterBuf);
   if (g.mipBuf) {

@@ -83,6 +83,7 @@ struct WorkCounters {
 struct FrameStats {
   uint32_t submitted = 0, culled = 0, drawn = 0, inside = 0, splats = 0;
   uint32_t sliced = 0;         // auto mode: boxes drawn as slices
+  uint32_t missing = 0;        // streamed packs: visible cells not drawn, their tiles not resident yet
   uint64_t points = 0;         // points mode: points drawn
   double cpuMs = 0;            // culling + submission + glFinish, wall clock
   double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)
@@ -109,11 +110,18 @@ class Renderer {
  public:
   Renderer();
   ~Renderer();
-  // Uploads the pack. streamPages: allocate the atlas but upload its pages a few per frame
-  // (a window shows its first image at once, whatever the pack's size; cells on pages not yet
-  // resident are skipped); the reader must then outlive the renderer.
+  // Uploads the pack. streamPages: allocate the atlas, then decode (a pack opened with
+  // PageLoad::kOnDemand) and upload its tiles in the background, the visible cells nearest the
+  // camera first, up to 64 MiB a frame; a cell whose tile is not resident yet is not drawn (a
+  // window shows its first image at once, whatever the pack's size). The reader must then
+  // outlive the renderer. Without streamPages the pack's pages must be in memory (PageLoad::kAll).
   Status init(const PackReader& pack, bool streamPages = false);
-  bool pagesPending() const;
+  bool tilesPending() const;
+  uint32_t tilesResident() const;  // cells whose tiles are on the GPU
+  // Blocks until every tile is decoded, then uploads them all (a streamed render that must be whole).
+  void waitForTiles();
+  // The first tile that failed to decode while streaming ("" when none): its cell never draws.
+  std::string streamError() const;
   // The points baseline: positions relative to the pack origin (xyz floats), RGBA8 colours.
   Status setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing);
   bool hasPoints() const { return pointCount_ > 0; }
@@ -147,7 +155,8 @@ class Renderer {
     float heightLo = 0, heightHi = 0;
     float pixelAngle = 0;  // vertical field of view over the height in pixels (radians)
   };
-  void uploadPages(uint64_t budgetBytes);
+  void uploadPages(const PackReader& pack);
+  void uploadTiles(uint64_t budgetBytes);
   Status ensureTargets(int width, int height);
   void uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double nearPlane, const RenderSettings& s,
                         VisibleSet& vis, FrameStats& st);

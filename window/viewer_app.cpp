@@ -79,6 +79,7 @@ struct AppState {
   std::string status;
   std::string packPath;
   std::string pendingWindowShot;
+  bool streamErrorShown = false;  // a tile that failed to decode was reported
   std::FILE* measureOut = stdout;
   GrooveSet grooves;   // --grooves
   int grooveSel = -1;  // selected in the panel or by the script
@@ -509,7 +510,7 @@ void drawPanel(AppState& s, GLFWwindow* win) {
 // the window opens) and the measurements file. An error names the file; nothing is opened.
 Status loadViewerInputs(AppState& s, const std::string& packPath, const ViewerOptions& opt, std::vector<ScriptCommand>& script) {
   s.packPath = packPath;
-  Status st = s.pack.open(packPath);
+  Status st = s.pack.open(packPath, PageLoad::kOnDemand);  // tiles decoded as the window needs them
   if (!st) return Status::badInput(st.message() + "\n(run 'scanatlas info' on it, or repack)");
   std::vector<std::string> inputs = packSources(s.pack);  // the points mode reads them
   inputs.insert(inputs.end(), {packPath, opt.scriptPath, opt.groovesPath});
@@ -673,6 +674,7 @@ struct ScriptRun {
 };
 
 bool scriptStep(AppState& s, GLFWwindow* win, ScriptRun& run, const std::string& path, bool& quit) {
+  if (s.renderer->tilesPending()) return true;  // a script sees the whole pack: its shots do not depend on timing
   if (run.waitFrames > 0) {
     --run.waitFrames;
   } else if (run.line < run.commands.size()) {
@@ -693,6 +695,24 @@ void reportFirstFrame(AppState& s, std::chrono::steady_clock::time_point tOpen) 
   std::fprintf(stderr, "view: first frame %.0f ms after opening the pack (%s, %u cells, %.1f MiB on the GPU)\n",
                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tOpen).count(),
                reinterpret_cast<const char*>(glGetString(GL_RENDERER)), s.pack.meta().cellCount, s.renderer->gpuBytes() / 1048576.0);
+}
+
+// A tile that failed to decode while streaming: said once, on stderr and in the panel.
+void reportStreamError(AppState& s) {
+  if (s.streamErrorShown) return;
+  const std::string e = s.renderer->streamError();
+  if (e.empty()) return;
+  std::fprintf(stderr, "scanatlas: error: %s (that cell is not drawn)\n", e.c_str());
+  s.status = e;
+  s.streamErrorShown = true;
+}
+
+// The first frame that lacked no visible cell's tile (streamed packs decode and upload the
+// nearest visible cells first).
+void reportViewComplete(AppState& s, std::chrono::steady_clock::time_point tOpen) {
+  std::fprintf(stderr, "view: every visible cell drawn %.0f ms after opening the pack (%u of %u tiles resident)\n",
+               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tOpen).count(),
+               s.renderer->tilesResident(), s.pack.meta().cellCount);
 }
 
 void reportMedianFrame(const AppState& s, int fbw, int fbh) {
@@ -717,6 +737,7 @@ void initView(AppState& s, GLFWwindow* win) {
 }  // namespace
 
 int runViewer(const std::string& packPath, const ViewerOptions& opt) {
+  const auto tOpen = std::chrono::steady_clock::now();
   AppState s;
   std::vector<ScriptCommand> script;
   Status st = loadViewerInputs(s, packPath, opt, script);
@@ -728,7 +749,6 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   GLFWwindow* win = openWindow(opt, title, opt.vsync && script.empty());
   if (!win) return 1;
   int rc = 0;
-  const auto tOpen = std::chrono::steady_clock::now();
   st = s.renderer->init(s.pack, /*streamPages=*/true);
   if (!st) {
     std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
@@ -738,7 +758,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   int fbw = 0, fbh = 0;
   ScriptRun run{script};
   MouseState mouse;
-  bool quit = rc != 0, firstFrame = true;
+  bool quit = rc != 0, firstFrame = true, viewComplete = false;
   auto lastTime = std::chrono::steady_clock::now();
   const double diag = (s.hi - s.lo).norm();
   while (!quit && !glfwWindowShouldClose(win)) {
@@ -782,11 +802,17 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
     if (!s.pendingWindowShot.empty()) saveWindowShot(s, fbw, fbh);
     char t[256];
-    std::snprintf(t, sizeof(t), "%s — %.1f ms%s", title.c_str(), fr.stats.cpuMs, s.renderer->pagesPending() ? " (loading pages)" : "");
+    char loading[64] = "";
+    if (s.renderer->tilesPending())
+      std::snprintf(loading, sizeof loading, " (loading tiles: %u of %u)", s.renderer->tilesResident(), s.pack.meta().cellCount);
+    std::snprintf(t, sizeof(t), "%s — %.1f ms%s", title.c_str(), fr.stats.cpuMs, loading);
     glfwSetWindowTitle(win, t);
     glfwSwapBuffers(win);
     if (firstFrame && !opt.quiet) reportFirstFrame(s, tOpen);
+    if (!viewComplete && fr.stats.missing == 0 && !opt.quiet) reportViewComplete(s, tOpen);
+    viewComplete = viewComplete || fr.stats.missing == 0;
     firstFrame = false;
+    reportStreamError(s);
   }
   if (!opt.quiet && !s.frameMs.empty()) reportMedianFrame(s, fbw, fbh);
   closeWindow(s, win);

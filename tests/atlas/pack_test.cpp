@@ -196,9 +196,24 @@ TEST(PackFile, CompressedPagesDecodeToTheRawPagesAndDamageIsNamed) {
     }
     // Metadata only: no pages decoded.
     PackReader meta;
-    ASSERT_TRUE(meta.open(d.file("z.hfa"), false).isOk());
+    ASSERT_TRUE(meta.open(d.file("z.hfa"), PageLoad::kNone).isOk());
     EXPECT_EQ(meta.heightPage(0), nullptr);
     EXPECT_TRUE(meta.hasColor());
+    // On demand: a tile is zero until its cell is decoded, then the same bytes; in any order.
+    PackReader lazy;
+    ASSERT_TRUE(lazy.open(d.file("z.hfa"), PageLoad::kOnDemand).isOk());
+    EXPECT_TRUE(lazy.onDemand());
+    EXPECT_FALSE(z.onDemand());
+    const CellRecord& c0 = lazy.cells()[0];
+    EXPECT_EQ(lazy.texel(c0, 0, 0), 0);
+    const uint32_t n = uint32_t(lazy.cells().size());
+    for (uint32_t k = 0; k < n; ++k) ASSERT_TRUE(lazy.decodeCell((k * 7 + 3) % n).isOk());
+    for (uint32_t p = 0; p < raw.meta().pageCount; ++p) {
+      ASSERT_EQ(std::memcmp(raw.heightPage(p), lazy.heightPage(p), P * 2), 0) << "page " << p;
+      ASSERT_EQ(std::memcmp(raw.normalPage(p), lazy.normalPage(p), P * kNormalBytes), 0) << "page " << p;
+      ASSERT_EQ(std::memcmp(raw.colorPage(p), lazy.colorPage(p), P * 4), 0) << "page " << p;
+    }
+    EXPECT_TRUE(raw.decodeCell(0).isOk()) << "raw pages: nothing to decode";
   }
   // Damage inside the HGTZ section's first tile: named, with its cell.
   const std::string path = d.file("z.hfa");
@@ -223,6 +238,13 @@ TEST(PackFile, CompressedPagesDecodeToTheRawPagesAndDamageIsNamed) {
   Status s = openDamaged(off + first[0] + 1, char(bytes[off + first[0] + 1] ^ 0x5a));  // the zstd frame's header
   ASSERT_FALSE(s.isOk());
   EXPECT_NE(s.message().find("damaged.hfa: section HGTZ, tile of cell 0"), std::string::npos) << s.message();
+  {  // on demand the pack opens; the damaged tile is the error of its cell alone
+    PackReader lazy;
+    ASSERT_TRUE(lazy.open(d.file("damaged.hfa"), PageLoad::kOnDemand).isOk());
+    s = lazy.decodeCell(0);
+    EXPECT_NE(s.message().find("damaged.hfa: section HGTZ, tile of cell 0"), std::string::npos) << s.message();
+    EXPECT_TRUE(lazy.decodeCell(1).isOk());
+  }
   s = openDamaged(off, char(bytes[off] + 1));  // the tile count
   ASSERT_FALSE(s.isOk());
   EXPECT_NE(s.message().find("does not index"), std::string::npos) << s.message();

@@ -1,0 +1,150 @@
+// Streamed packs: tiles decoded on background threads in the order the view asks for them, and
+// a streamed window's image, once every tile is resident, the same as a pack uploaded whole.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "../common/render_util.h"
+#include "preprocess/pipeline.h"
+#include "viewer/renderer.h"
+#include "viewer/tile_streamer.h"
+
+namespace sa {
+namespace {
+
+// A real scan with compressed pages: the autzen LAS (2700-odd cells).
+std::string packAutzen(const test::TempDir& d) {
+  EXPECT_TRUE(test::haveSharedData()) << "../shared/data is missing";
+  auto in = InputSet::open({test::sharedData("lidar/autzen_trim.las")});
+  EXPECT_TRUE(in.isOk());
+  PackSummary sum;
+  EXPECT_TRUE(packInput(*in, d.file("a.hfa"), PackOptions{}, nullptr, sum).isOk());
+  return d.file("a.hfa");
+}
+
+// Every decoded cell taken from the streamer, waiting for the rest.
+std::vector<uint32_t> drain(TileStreamer& s) {
+  s.waitAll();
+  return s.takeDecoded();
+}
+
+TEST(TileStreamer, WantedCellsComeFirstAndEveryCellComesOnce) {
+  test::TempDir d;
+  PackReader p;
+  ASSERT_TRUE(p.open(packAutzen(d), PageLoad::kOnDemand).isOk());
+  ASSERT_TRUE(p.onDemand());
+  const uint32_t n = uint32_t(p.cells().size());
+  ASSERT_GT(n, 1000u);
+  TileStreamer s(p, 1);
+  // The thread may have started in cell order: whatever it took before the wish, then the wish.
+  std::vector<uint32_t> got = s.takeDecoded();
+  const std::vector<uint32_t> wish = {n - 1, n / 2, n - 5};
+  s.want(wish);
+  std::vector<uint32_t> rest = drain(s);
+  for (uint32_t c : wish) {
+    const auto at = std::find(rest.begin(), rest.end(), c);
+    if (std::find(got.begin(), got.end(), c) != got.end()) continue;  // taken before the wish
+    ASSERT_NE(at, rest.end());
+    // One cell in flight and one finished between the take and the wish may come before it.
+    EXPECT_LE(at - rest.begin(), ptrdiff_t(2 + wish.size())) << "cell " << c;
+  }
+  got.insert(got.end(), rest.begin(), rest.end());
+  std::sort(got.begin(), got.end());
+  ASSERT_EQ(got.size(), n);
+  for (uint32_t i = 0; i < n; ++i) EXPECT_EQ(got[i], i);
+  EXPECT_TRUE(s.done());
+  EXPECT_TRUE(s.error().isOk());
+  // Decoded in the background, the pages are those decoded at open.
+  PackReader whole;
+  ASSERT_TRUE(whole.open(p.path()).isOk());
+  ASSERT_EQ(std::memcmp(whole.heightPage(0), p.heightPage(0), p.pageTexels() * 2), 0);
+}
+
+TEST(TileStreamer, ADamagedTileIsNamedAndTheOthersStillCome) {
+  test::TempDir d;
+  const std::string path = packAutzen(d);
+  PackReader z;
+  ASSERT_TRUE(z.open(path).isOk());
+  uint64_t off = 0, first[2];
+  for (const SectionEntry& e : z.sectionTable())
+    if (std::memcmp(e.id, "HGTZ", 4) == 0) off = e.offset;
+  ASSERT_GT(off, 0u);
+  std::memcpy(first, z.section("HGTZ").data() + 8 + 16 * 3, sizeof first);  // cell 3's tile
+  std::vector<char> b(std::filesystem::file_size(path));
+  std::ifstream(path, std::ios::binary).read(b.data(), std::streamsize(b.size()));
+  b[off + first[0] + 1] ^= 0x5a;
+  std::ofstream(d.file("bad.hfa"), std::ios::binary).write(b.data(), std::streamsize(b.size()));
+  PackReader p;
+  ASSERT_TRUE(p.open(d.file("bad.hfa"), PageLoad::kOnDemand).isOk());
+  TileStreamer s(p, 2);
+  EXPECT_EQ(drain(s).size(), p.cells().size());
+  const Status e = s.error();
+  ASSERT_FALSE(e.isOk());
+  EXPECT_NE(e.message().find("bad.hfa: section HGTZ, tile of cell 3"), std::string::npos) << e.message();
+}
+
+class StreamingTest : public test::GlTest {};
+
+// A real scan (autzen LAS, compressed pages): frames while tiles stream draw only resident
+// cells and say how many visible cells they lack; once streaming ends the image is the one a
+// pack uploaded whole gives, bit for bit.
+TEST_F(StreamingTest, AStreamedPackEndsWithTheImageOfAWholeUpload) {
+  test::TempDir d;
+  packAutzen(d);
+  PackReader whole, lazy;
+  ASSERT_TRUE(whole.open(d.file("a.hfa")).isOk());
+  ASSERT_TRUE(whole.compressedPages());
+  ASSERT_TRUE(lazy.open(d.file("a.hfa"), PageLoad::kOnDemand).isOk());
+  Renderer rw, rs;
+  ASSERT_TRUE(rw.init(whole).isOk());
+  EXPECT_FALSE(rw.tilesPending());
+  Renderer bad;
+  EXPECT_FALSE(bad.init(lazy).isOk()) << "pages on demand must be streamed";
+  ASSERT_TRUE(rs.init(lazy, true).isOk());
+  Camera cam;
+  const Eigen::Vector3d o(whole.meta().origin), lo = o + Eigen::Vector3d(whole.meta().boundsMin),
+      hi = o + Eigen::Vector3d(whole.meta().boundsMax);
+  cam.target = (lo + hi) / 2;
+  cam.eye = cam.target + Eigen::Vector3d(0.3, -0.8, 0.6) * (hi - lo).norm();
+  cam.up = Eigen::Vector3d::UnitZ();
+  cam.width = cam.height = 160;
+  RenderSettings rset;
+  FrameResult full, fr;
+  ASSERT_TRUE(rw.render(cam, rset, full, true).isOk());
+  ASSERT_EQ(full.stats.missing, 0u);
+  ASSERT_GT(full.cellsDrawn, 100u);
+  int frames = 0;
+  uint32_t maxMissing = 0;
+  while (rs.tilesPending() && frames < 100000) {
+    ASSERT_TRUE(rs.render(cam, rset, fr, true).isOk());
+    EXPECT_LE(fr.cellsDrawn + fr.stats.splats, full.cellsDrawn + full.stats.splats);
+    maxMissing = std::max(maxMissing, fr.stats.missing);
+    ++frames;
+  }
+  ASSERT_FALSE(rs.tilesPending());
+  EXPECT_EQ(rs.tilesResident(), whole.cells().size());
+  EXPECT_EQ(rs.streamError(), "");
+  ASSERT_TRUE(rs.render(cam, rset, fr, true).isOk());
+  std::printf("autzen: %d streamed frames (at most %u visible cells missing), then %u cells drawn\n", frames, maxMissing,
+              fr.cellsDrawn);
+  EXPECT_EQ(fr.stats.missing, 0u);
+  EXPECT_EQ(fr.cellsDrawn, full.cellsDrawn);
+  EXPECT_EQ(fr.color.rgba, full.color.rgba);
+  ASSERT_EQ(fr.depth.size(), full.depth.size());
+  EXPECT_EQ(std::memcmp(fr.depth.data(), full.depth.data(), fr.depth.size() * sizeof(float)), 0);
+  // waitForTiles: a second streamed renderer made whole at once.
+  PackReader lazy2;
+  ASSERT_TRUE(lazy2.open(d.file("a.hfa"), PageLoad::kOnDemand).isOk());
+  Renderer r2;
+  ASSERT_TRUE(r2.init(lazy2, true).isOk());
+  r2.waitForTiles();
+  EXPECT_FALSE(r2.tilesPending());
+  ASSERT_TRUE(r2.render(cam, rset, fr, true).isOk());
+  EXPECT_EQ(fr.color.rgba, full.color.rgba);
+}
+
+}  // namespace
+}  // namespace sa
