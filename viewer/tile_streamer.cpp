@@ -6,7 +6,7 @@ namespace sa {
 
 TileStreamer::TileStreamer(const PackReader& pack, unsigned threads)
     : pack_(pack), cellCount_(uint32_t(pack.cells().size())), claimed_(cellCount_, 0) {
-  if (threads == 0) threads = std::max(2u, std::thread::hardware_concurrency()) - 1;
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   for (unsigned t = 0; t < threads; ++t) threads_.emplace_back([this] { work(); });
 }
 

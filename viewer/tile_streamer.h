@@ -17,7 +17,7 @@ namespace sa {
 
 class TileStreamer {
  public:
-  // `pack` must outlive the streamer. threads: decoding threads (0: the cores less one, at least 1).
+  // `pack` must outlive the streamer. threads: decoding threads (0: one per core).
   explicit TileStreamer(const PackReader& pack, unsigned threads = 0);
   ~TileStreamer();
   TileStreamer(const TileStreamer&) = delete;

@@ -374,6 +374,16 @@ TEST(Cli, ConvertInfoAndMixedPackOnRealFiles) {
   ASSERT_EQ(mix.code, 0) << mix.out;
   EXPECT_EQ(nlohmann::json::parse(mix.out)["points"].get<int>(), 3 * 209280);
   EXPECT_EQ(run("verify " + d.file("mix.hfa")).code, 0);
+  // bench --stream: the window's start (tiles decoded in the background), then the timed frames.
+  CmdResult sb = run("bench " + d.file("mix.hfa") + " --stream --orbit 2 --size 64x64 --warmup 0 --frames 2 --json");
+  ASSERT_EQ(sb.code, 0) << sb.out;
+  auto sj = nlohmann::json::parse(sb.out);
+  EXPECT_GT(sj["stream"]["tiles"].get<int>(), 0);
+  EXPECT_GT(sj["stream"]["tiles_resident"].get<int>(), 0);
+  EXPECT_LE(sj["stream"]["tiles_resident"].get<int>(), sj["stream"]["tiles"].get<int>());
+  EXPECT_GE(sj["stream"]["frames_to_complete"].get<int>(), 1);
+  EXPECT_LE(sj["stream"]["first_frame_ms"].get<double>(), sj["stream"]["view_complete_ms"].get<double>());
+  EXPECT_EQ(sj["configs"].size(), 1u);
 
   // Failures: exit 2 with no output file and no temporary left behind.
   EXPECT_EQ(run("convert " + las + " -o " + d.file("x.las")).code, 2);  // no LAS writer
