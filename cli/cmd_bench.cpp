@@ -56,6 +56,9 @@ const char* kHelp =
     "                         the visible ones nearest the camera first) and report the time to the\n"
     "                         first frame and to the first frame that lacks no visible cell, on the\n"
     "                         first camera; the timed frames then run with every tile resident\n"
+    "%s"
+    "                         (bench: per configuration the uploads, evictions, cells drawn coarser\n"
+    "                         and bytes resident per frame; the timed frames stream as they would)\n"
     "  --csv FILE             one row per frame\n"
     "  --json                 the summary as JSON on stdout\n"
     "  -q, --quiet            no table\n";
@@ -96,6 +99,7 @@ struct Row {
   Config config;
   Summary gpu, cpu;
   double drawn = 0, culled = 0, splats = 0, sliced = 0, frags = 0, submitted = 0;
+  double uploads = 0, evicted = 0, coarsened = 0, missing = 0, residentBytes = 0;  // --gpu-budget, per frame
   bool invocations = false;
   WorkCounters work;  // one counted frame per camera, after the timed ones (atomics cost time)
   RenderMode drawn_mode = RenderMode::kParallax;
@@ -123,6 +127,11 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
     row.sliced += st.sliced;
     row.frags += double(st.fragments);
     row.submitted += st.submitted;
+    row.uploads += st.uploads;
+    row.evicted += st.evicted;
+    row.coarsened += st.coarsened;
+    row.missing += st.missing;
+    row.residentBytes += double(st.residentBytes);
     csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f << ","
         << cam << "," << st.gpuMs << "," << st.cpuMs << "," << st.submitted << "," << st.culled << "," << st.drawn << ","
         << st.inside << "," << st.splats << "," << st.points << "," << st.fragments << "\n";
@@ -134,6 +143,7 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
   row.sliced /= n;
   row.frags /= n;
   row.submitted /= n;
+  for (double* v : {&row.uploads, &row.evicted, &row.coarsened, &row.missing, &row.residentBytes}) *v /= n;
   row.gpu = summarize(gpu);
   row.cpu = summarize(cpu);
   row.invocations = fr.stats.fragmentsAreInvocations;
@@ -149,7 +159,7 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
   return Status::ok();
 }
 
-std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pack) {
+std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pack, bool budget) {
   const Config& c = r.config;
   const bool points = c.settings.mode == RenderMode::kPoints;
   const ModeSection ms = modeSection(pack, c.settings.mode);
@@ -163,6 +173,10 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
        << ", \"drawn_mode\": \"" << modeName(points ? RenderMode::kPoints : r.drawn_mode) << "\""
        << ", \"mode_gpu_bytes\": " << renderer.modeGpuBytes(c.settings.mode) << ", \"mode_disk_bytes\": " << ms.bytes
        << ", \"bake_s\": " << ms.bakeSeconds;
+  if (budget)
+    json << ", \"budget\": {\"uploads_per_frame\": " << r.uploads << ", \"evicted_per_frame\": " << r.evicted
+         << ", \"coarsened_per_frame\": " << r.coarsened << ", \"missing_per_frame\": " << r.missing
+         << ", \"resident_bytes\": " << r.residentBytes << "}";
   if (r.work.valid && r.work.rays > 0)  // modes that cast nothing (slices) count nothing
     json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kParallax ? "samples" : "nodes") << "\", \"rays\": " << r.work.rays
          << ", \"lookups\": " << r.work.lookups << ", \"fallbacks\": " << r.work.fallbacks
@@ -229,18 +243,20 @@ std::string streamJson(const StreamReport& s, uint32_t cells) {
 int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "csv"},
+                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "csv", "gpu-budget"},
                      {"compare-skips", "stream", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
-    std::fputs(kHelp, stdout);
+    std::printf(kHelp, kGpuBudgetHelp);
     return 0;
   }
   if (!s) return reportError(s);
   if (a.positionals().size() != 1) return reportError(Status::badInput("bench: give exactly one pack (see --help)"));
   const auto t0 = std::chrono::steady_clock::now();
-  const bool stream = a.flag("stream");
+  auto budget = gpuBudgetFromArgs(a);
+  if (!budget) return reportError(budget.status());
+  const bool stream = a.flag("stream") || *budget > 0;
   PackReader pack;
   s = pack.open(a.positionals()[0], stream ? PageLoad::kOnDemand : PageLoad::kAll);
   if (!s) return reportError(s);
@@ -316,11 +332,11 @@ int cmdBench(int argc, char** argv) {
   s = ctx.init();
   if (!s) return reportError(s);
   Renderer renderer;
-  s = renderer.init(pack, stream);
+  s = renderer.init(pack, stream, *budget);
   if (!s) return reportError(s);
   const bool quiet = a.flag("quiet") || a.flag("json");
   streamed.initMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  if (stream) {
+  if (a.flag("stream")) {
     s = streamFirstView(renderer, cams[0], configs[0].settings, t0, streamed);
     if (!s) return reportError(s);
     if (!quiet)
@@ -343,7 +359,8 @@ int cmdBench(int argc, char** argv) {
   json << "{\"pack\": \"" << jsonEscape(pack.path()) << "\", \"renderer\": \"" << jsonEscape(ctx.renderer())
        << "\", \"width\": " << cams[0].width << ", \"height\": " << cams[0].height << ", \"frames\": " << *frames
        << ", \"warmup\": " << *warmup << ", \"cameras\": " << cams.size();
-  if (stream) json << ", \"stream\": " << streamJson(streamed, pack.meta().cellCount);
+  if (*budget) json << ", \"gpu_budget\": " << *budget;
+  if (a.flag("stream")) json << ", \"stream\": " << streamJson(streamed, pack.meta().cellCount);
   json << ", \"configs\": [";
   // Frames of every configuration, on a terminal as a bar with the time left.
   Progress progress(!quiet, "bench", "frames");
@@ -357,7 +374,7 @@ int cmdBench(int argc, char** argv) {
     });
     if (!s) return reportError(s);
     rows.push_back(row);
-    json << (ci ? ", " : "") << rowJson(row, renderer, pack);
+    json << (ci ? ", " : "") << rowJson(row, renderer, pack, *budget > 0);
   }
   progress.finish();
   if (!quiet) printTable(rows, ctx.renderer());

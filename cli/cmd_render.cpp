@@ -66,6 +66,7 @@ const char* kHelp =
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
     "                         turn off what a frame skips by default (see scanatlas bench)\n"
     "  --background R,G,B     background colour, 0..1 (default 0.1,0.1,0.12)\n"
+    "%s"
     "  --json                 print per-view frame times as JSON on stdout\n"
     "  -q, --quiet            print nothing but errors\n";
 
@@ -176,18 +177,20 @@ int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "auto-pixels", "refine",
-                      "background", "shading", "clip-box", "section", "mode", "light"},
+                      "background", "shading", "clip-box", "section", "mode", "light", "gpu-budget"},
                      {"edl", "shadows", "boxes", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
-    std::fputs(kHelp, stdout);
+    std::printf(kHelp, kGpuBudgetHelp);
     return 0;
   }
   if (!s) return reportError(s);
   if (a.positionals().size() != 1) return reportError(Status::badInput("render: give exactly one pack (see --help)"));
   if (!a.has("output")) return reportError(Status::badInput("render: -o OUT.png is required"));
+  auto budget = gpuBudgetFromArgs(a);
+  if (!budget) return reportError(budget.status());
   PackReader pack;
-  s = pack.open(a.positionals()[0]);
+  s = pack.open(a.positionals()[0], *budget ? PageLoad::kOnDemand : PageLoad::kAll);
   if (!s) return reportError(s);
   std::vector<Camera> cams;
   s = camerasFromArgs(a, pack, 0, 1024, cams);
@@ -207,7 +210,7 @@ int cmdRender(int argc, char** argv) {
   s = ctx.init();
   if (!s) return reportError(s);
   Renderer renderer;
-  s = renderer.init(pack);
+  s = renderer.init(pack, *budget > 0, *budget);
   if (!s) return reportError(s);
   const bool quiet = a.flag("quiet"), json = a.flag("json");
   if (!quiet) warnIfModeFallsBack(renderer, pack, rs.mode);
@@ -215,8 +218,14 @@ int cmdRender(int argc, char** argv) {
   if (json) std::printf("{\"renderer\": \"%s\", \"views\": [", jsonEscape(ctx.renderer()).c_str());
   for (size_t i = 0; i < cams.size(); ++i) {
     FrameResult fr;
-    s = renderer.render(cams[i], rs, fr, a.has("depth-out"));
+    uint64_t frames = 1;
+    const unsigned readBack = kReadColor | (a.has("depth-out") ? kReadDepth : 0u);
+    s = *budget ? renderSettled(renderer, cams[i], rs, fr, readBack, frames) : renderer.render(cams[i], rs, fr, readBack);
     if (!s) return reportError(s);
+    if (*budget && !quiet && !json)
+      std::fprintf(stderr, "%s: --gpu-budget: settled after %llu frames, %.1f MiB of tiles resident, %u cells %d level(s) coarser to fit\n",
+                   outputs.images[i].c_str(), (unsigned long long)frames, fr.stats.residentBytes / 1048576.0, fr.stats.coarsened,
+                   fr.stats.budgetBias);
     const std::string& image = outputs.images[i];
     s = writeImage(image, fr.color);
     if (!s) return reportError(s);

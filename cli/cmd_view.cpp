@@ -4,6 +4,7 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/progress.h"
+#include "cli/view_setup.h"
 #include "common/fileio.h"
 #include "preprocess/pipeline.h"
 #include "window/viewer_app.h"
@@ -38,7 +39,7 @@ Result<std::string> packForView(const std::string& path, bool quiet) {
 
 int cmdView(int argc, char** argv) {
   Args a;
-  Status s = a.parse(argc, argv, {"script", "measurements", "size", "grooves"}, {"no-vsync", "quiet", "help"},
+  Status s = a.parse(argc, argv, {"script", "measurements", "size", "grooves", "gpu-budget"}, {"no-vsync", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::printf(
@@ -56,8 +57,9 @@ int cmdView(int argc, char** argv) {
         "  --measurements FILE    picks and measurements as CSV (default: stdout)\n"
         "  --grooves FILE         a grooves JSON (scanatlas grooves): listed in the panel with width,\n"
         "                         depth and length (click to fly there) and drawn over the view\n"
+        "%s"
         "\n%s",
-        kViewerScriptHelp);
+        kGpuBudgetHelp, kViewerScriptHelp);
     return 0;
   }
   if (!s) return reportError(s);
@@ -68,6 +70,9 @@ int cmdView(int argc, char** argv) {
   opt.groovesPath = a.get("grooves");
   opt.vsync = !a.flag("no-vsync");
   opt.quiet = a.flag("quiet");
+  auto budget = gpuBudgetFromArgs(a);
+  if (!budget) return reportError(budget.status());
+  opt.gpuBudget = *budget;
   if (a.has("size")) {
     s = parseWxH("size", a.get("size"), opt.width, opt.height);
     if (!s) return reportError(s);

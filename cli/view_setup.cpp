@@ -141,4 +141,23 @@ Status slicesFromArgs(const Args& a, RenderSettings& rs) {
   return Status::ok();
 }
 
+Result<uint64_t> gpuBudgetFromArgs(const Args& a) {
+  if (!a.has("gpu-budget")) return uint64_t(0);
+  auto v = parseSize("gpu-budget", a.get("gpu-budget"));
+  if (!v) return v.status();
+  if (*v < (uint64_t(16) << 20)) return Status::badInput("--gpu-budget: at least 16M is needed");
+  return *v;
+}
+
+Status renderSettled(Renderer& r, const Camera& cam, const RenderSettings& rs, FrameResult& out, unsigned readBack,
+                     uint64_t& frames, uint64_t maxFrames) {
+  frames = 0;
+  do {  // at least one frame: whether tiles are pending is known only once this view has been planned
+    SA_RETURN_IF_ERROR(r.render(cam, rs, out, 0u));
+    ++frames;
+  } while (r.tilesPending() && frames < maxFrames);
+  ++frames;
+  return r.render(cam, rs, out, readBack);
+}
+
 }  // namespace sa

@@ -25,4 +25,17 @@ void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi
 // Says on stderr when the pack lacks what mode m needs (and what draws instead, and how to bake it).
 void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m);
 
+// --gpu-budget SIZE (suffixes K, M, G; at least 16M) in bytes, 0 when not given.
+Result<uint64_t> gpuBudgetFromArgs(const Args& a);
+inline constexpr const char* kGpuBudgetHelp =
+    "  --gpu-budget SIZE      keep at most SIZE of tiles on the GPU (suffixes K, M, G): each visible\n"
+    "                         cell's tile at the level its texels on screen ask for (coarser where a\n"
+    "                         texel is under a pixel, all coarser when the view does not fit), tiles\n"
+    "                         decoded in the background, the cells seen longest ago evicted first;\n"
+    "                         parallax, slices, auto and points modes\n";
+// A frame of a streamed renderer once its tiles have settled for this view (frames rendered until
+// none is pending, at most maxFrames); `frames` the frames it took.
+Status renderSettled(Renderer& r, const Camera& cam, const RenderSettings& rs, FrameResult& out, unsigned readBack,
+                     uint64_t& frames, uint64_t maxFrames = 100000);
+
 }  // namespace sa

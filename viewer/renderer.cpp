@@ -4,12 +4,14 @@
 #include "modes/gdm/gdm.h"
 #include "modes/grooves/groove_cast.h"
 #include "modes/vdm/vdm.h"
+#include "viewer/tile_cache.h"
 #include "viewer/tile_streamer.h"
 
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 
 #include <chrono>
+#include <cstddef>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -135,6 +137,13 @@ struct Renderer::Gl {
   std::vector<uint8_t> resident;
   uint32_t residentCount = 0;
   std::string streamError;
+  // --gpu-budget: the tile cache's residency, each cell's coarser levels (built by the decoder),
+  // which cells are decoded, and the last frame's plan.
+  std::unique_ptr<TileResidency> residency;
+  std::vector<std::vector<TileImage>> mips;
+  std::vector<uint8_t> decoded;
+  TileResidency::Frame lastPlan;
+  bool budgetSettled = false;
   void releaseTargets() {
     GLuint fbos[] = {fbo, postFbo};
     glDeleteFramebuffers(2, fbos);
@@ -176,9 +185,20 @@ Renderer::~Renderer() = default;
 
 double Renderer::nearPlane() const { return std::max((boundsMax_ - boundsMin_).norm() / 2, 1e-12) * 1e-5; }
 
-bool Renderer::tilesPending() const { return gl_ && gl_->streamer != nullptr; }
+bool Renderer::tilesPending() const {
+  if (!gl_) return false;
+  return gl_->residency ? !gl_->budgetSettled : gl_->streamer != nullptr;
+}
 
-uint32_t Renderer::tilesResident() const { return !gl_ ? 0 : gl_->streamer ? gl_->residentCount : cellCount_; }
+uint32_t Renderer::tilesResident() const {
+  if (!gl_) return 0;
+  if (gl_->residency) {
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < cellCount_; ++i) n += gl_->residency->residentFlags()[i];
+    return n;
+  }
+  return gl_->streamer ? gl_->residentCount : cellCount_;
+}
 
 std::string Renderer::streamError() const {
   if (gl_ && gl_->streamer && gl_->streamError.empty()) {
@@ -188,7 +208,7 @@ std::string Renderer::streamError() const {
   return gl_ ? gl_->streamError : std::string();
 }
 
-Status Renderer::init(const PackReader& pack, bool streamPages) {
+Status Renderer::init(const PackReader& pack, bool streamPages, uint64_t gpuBudget) {
   gl_ = std::make_unique<Gl>();
   Gl& g = *gl_;
   const PackMeta& m = pack.meta();
@@ -235,7 +255,7 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   }
   glCreateBuffers(1, &g.cellBuf);
   glNamedBufferStorage(g.cellBuf, GLsizeiptr(std::max<size_t>(1, cells.size()) * sizeof(GpuCell)),
-                       cells.empty() ? nullptr : cells.data(), 0);
+                       cells.empty() ? nullptr : cells.data(), gpuBudget ? GL_DYNAMIC_STORAGE_BIT : 0);
   gpuBytes_ = cells.size() * sizeof(GpuCell);
   glCreateBuffers(1, &g.itemBuf);
   glGetIntegerv(GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT, &g.ssboAlign);
@@ -244,6 +264,7 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   GLint maxLayers = 0, maxSize = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &maxLayers);
   glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
+  if (gpuBudget) return initBudget(pack, gpuBudget, maxLayers);
   const GLsizei PW = GLsizei(m.pageWidth), PH = GLsizei(m.pageHeight), PC = GLsizei(m.pageCount);
   if (PC > maxLayers || PW > maxSize || PH > maxSize)
     return Status::internal(pack.path() + ": atlas needs " + std::to_string(m.pageCount) + " layers of " +
@@ -251,24 +272,11 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
                             std::to_string(maxLayers) + " layers of " + std::to_string(maxSize) + "^2");
   const uint64_t pageTexels = pack.pageTexels() * m.pageCount;
   // An array texture per page channel; a channel the pack lacks gets one constant texel.
-  auto pages = [&](GLenum format, bool present, const uint8_t* fill, GLenum fillFormat, uint64_t bytesPerTexel) {
-    GLuint t = 0;
-    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &t);
-    if (present) {
-      glTextureStorage3D(t, 1, format, PW, PH, PC);
-      gpuBytes_ += pageTexels * bytesPerTexel;
-    } else {
-      glTextureStorage3D(t, 1, format, 1, 1, 1);
-      glTextureSubImage3D(t, 0, 0, 0, 0, 1, 1, 1, fillFormat, GL_UNSIGNED_BYTE, fill);
-    }
-    glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    return t;
-  };
   const uint8_t white[4] = {255, 255, 255, 255}, up[2] = {128, 128};  // a lone texel: unsampled without pages
-  g.heightTex = pages(GL_R16UI, true, nullptr, 0, 2);
-  g.pageColorTex = pages(GL_RGBA8, hasColor_, white, GL_RGBA, 4);
-  g.normalTex = pages(kNormalBytes == 2 ? GL_RG8 : GL_RG16, hasNormals_, up, GL_RG, kNormalBytes);
+  g.heightTex = pageTexture(GL_R16UI, true, nullptr, 0, PW, PH, PC);
+  g.pageColorTex = pageTexture(GL_RGBA8, hasColor_, white, GL_RGBA, PW, PH, PC);
+  g.normalTex = pageTexture(kNormalBytes == 2 ? GL_RG8 : GL_RG16, hasNormals_, up, GL_RG, PW, PH, PC);
+  gpuBytes_ += pageTexels * (2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0));
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   if (streamPages) {
     g.pack = &pack;
@@ -281,6 +289,115 @@ Status Renderer::init(const PackReader& pack, bool streamPages) {
   uploadPages(pack);
   if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while uploading the pack (out of memory?)");
   return Status::ok();
+}
+
+// An array texture per page channel of w x h x layers; a channel the pack lacks gets one
+// constant texel.
+unsigned Renderer::pageTexture(unsigned format, bool present, const uint8_t* fill, unsigned fillFormat, uint32_t w,
+                               uint32_t h, uint32_t layers) {
+  GLuint t = 0;
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &t);
+  if (present) {
+    glTextureStorage3D(t, 1, format, GLsizei(w), GLsizei(h), GLsizei(layers));
+  } else {
+    glTextureStorage3D(t, 1, format, 1, 1, 1);
+    glTextureSubImage3D(t, 0, 0, 0, 0, 1, 1, 1, fillFormat, GL_UNSIGNED_BYTE, fill);
+  }
+  glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  return t;
+}
+
+// --gpu-budget: the page textures are a cache of square layers (the largest tile with its gutter,
+// at least 256 texels, to a power of two) as many as the budget holds; tiles stream in as the
+// frames plan, at the level each cell's projected texel size asks for.
+Status Renderer::initBudget(const PackReader& pack, uint64_t budget, int maxLayers) {
+  Gl& g = *gl_;
+  uint32_t size = 256;
+  for (const CellRecord& c : pack.cells())
+    while (size < uint32_t(std::max(c.tileW, c.tileH)) + 2) size <<= 1;
+  const uint64_t texelBytes = 2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0);
+  const uint64_t layerBytes = uint64_t(size) * size * texelBytes;
+  const uint64_t layers = std::max<uint64_t>(1, budget / layerBytes);
+  if (layers > uint64_t(maxLayers))
+    return Status::badInput("--gpu-budget " + std::to_string(budget >> 20) + " MiB needs " + std::to_string(layers) +
+                            " texture layers of " + std::to_string(size) + "^2 but the GL allows " + std::to_string(maxLayers));
+  const uint8_t white[4] = {255, 255, 255, 255}, up[2] = {128, 128};
+  g.heightTex = pageTexture(GL_R16UI, true, nullptr, 0, size, size, uint32_t(layers));
+  g.pageColorTex = pageTexture(GL_RGBA8, hasColor_, white, GL_RGBA, size, size, uint32_t(layers));
+  g.normalTex = pageTexture(kNormalBytes == 2 ? GL_RG8 : GL_RG16, hasNormals_, up, GL_RG, size, size, uint32_t(layers));
+  gpuBytes_ += layers * layerBytes;
+  if (glGetError() != GL_NO_ERROR) return Status::internal("OpenGL error while allocating the tile cache (out of memory?)");
+  for (const ModeInfo& mi : allModes())
+    if (!budgetMode(mi.mode)) modeProblems_[int(mi.mode)] = "--gpu-budget: this mode needs every tile at full resolution";
+  g.pack = &pack;
+  g.residency = std::make_unique<TileResidency>(pack.cells(), size, uint32_t(layers), texelBytes);
+  g.mips.resize(cellCount_);
+  g.decoded.assign(cellCount_, 0);
+  g.streamer = std::make_unique<TileStreamer>(pack, 0, [&g, &pack](uint32_t i) { g.mips[i] = buildMips(pack, i); });
+  return Status::ok();
+}
+
+// --gpu-budget: one tile level into its cache block (the image with its gutter at the block's
+// corner), and the cell's entry pointed at it.
+void Renderer::uploadLevel(const TileResidency::Upload& u) {
+  Gl& g = *gl_;
+  const PackReader& pack = *g.pack;
+  const CellRecord& c = pack.cells()[u.cell];
+  uint32_t w, h;
+  TileResidency::levelSize(c, u.level, w, h);
+  const GLint x = GLint(u.block.x), y = GLint(u.block.y), z = GLint(u.block.layer);
+  const GLsizei W = GLsizei(w + 2), H = GLsizei(h + 2);
+  const GLenum nType = kNormalBytes == 2 ? GL_UNSIGNED_BYTE : GL_UNSIGNED_SHORT;
+  if (u.level == 0) {  // from the pack's pages
+    const uint32_t PW = pack.meta().pageWidth;
+    const uint64_t at = uint64_t(c.tileY - 1) * PW + (c.tileX - 1);
+    glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(PW));
+    glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, pack.heightPage(c.page) + at);
+    if (hasColor_) glTextureSubImage3D(g.pageColorTex, 0, x, y, z, W, H, 1, GL_RGBA, GL_UNSIGNED_BYTE, pack.colorPage(c.page) + 4 * at);
+    if (hasNormals_) glTextureSubImage3D(g.normalTex, 0, x, y, z, W, H, 1, GL_RG, nType, pack.normalPage(c.page) + kNormalBytes * at);
+    glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  } else {
+    const TileImage& t = g.mips[u.cell][u.level - 1];
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);  // rows of an odd number of 2-byte texels
+    glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, t.heights.data());
+    if (hasColor_) glTextureSubImage3D(g.pageColorTex, 0, x, y, z, W, H, 1, GL_RGBA, GL_UNSIGNED_BYTE, t.rgba.data());
+    if (hasNormals_) glTextureSubImage3D(g.normalTex, 0, x, y, z, W, H, 1, GL_RG, nType, t.normals.data());
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  }
+  const float size[2] = {float(w), float(h)};
+  const int32_t tile[3] = {int32_t(u.block.layer), int32_t(u.block.x + 1), int32_t(u.block.y + 1)};
+  const GLintptr base = GLintptr(u.cell) * GLintptr(sizeof(GpuCell));
+  glNamedBufferSubData(g.cellBuf, base + GLintptr(offsetof(GpuCell, boxW) + 8), sizeof size, size);
+  glNamedBufferSubData(g.cellBuf, base + GLintptr(offsetof(GpuCell, tile)), sizeof tile, tile);
+}
+
+// --gpu-budget, each frame before drawing: the cells decoded since, every visible cell's level
+// planned against the cache, up to 64 MiB of levels uploaded. Returns whether any was.
+bool Renderer::planBudget(const Camera& cam, const Eigen::Vector3d& camRel, const VisibleSet& vis, FrameStats& st) {
+  Gl& g = *gl_;
+  for (uint32_t i : g.streamer ? g.streamer->takeDecoded() : std::vector<uint32_t>{}) g.decoded[i] = 1;
+  if (g.streamer && g.streamer->done()) {
+    streamError();
+    g.streamer.reset();
+  }
+  std::vector<uint32_t> visible = vis.missing;
+  for (const std::vector<DrawItem>* list : {&vis.front, &vis.inside, &vis.splats, &vis.sliced})
+    for (const DrawItem& d : *list) visible.push_back(d.cell);
+  const double focalPx = cam.height / (2 * std::tan(cam.fovDeg * M_PI / 360.0));
+  g.lastPlan = g.residency->plan(visible, g.decoded.data(), camRel, focalPx, uint64_t(64) << 20);
+  for (const TileResidency::Upload& u : g.lastPlan.uploads) uploadLevel(u);
+  std::vector<uint32_t> undecoded;
+  for (uint32_t i : vis.missing)
+    if (!g.decoded[i]) undecoded.push_back(i);
+  if (g.streamer) g.streamer->want(std::move(undecoded));
+  st.uploads = uint32_t(g.lastPlan.uploads.size());
+  st.evicted = g.lastPlan.evicted;
+  st.coarsened = g.lastPlan.coarsened;
+  st.budgetBias = g.lastPlan.bias;
+  st.residentBytes = g.residency->residentBytes();
+  g.budgetSettled = g.lastPlan.waiting == 0 && g.lastPlan.uploads.empty();
+  return !g.lastPlan.uploads.empty();
 }
 
 // A mode section's per-cell entry table and its blocks of words (vdm, gdm) as two storage
@@ -365,6 +482,7 @@ Status Renderer::initModes(const PackReader& pack) {
 
 bool Renderer::modeReady(RenderMode m) const {
   if (m == RenderMode::kPoints) return hasPoints();
+  if (gl_ && gl_->residency && !budgetMode(m)) return false;  // needs every tile at level 0
   return gl_ && gl_->front[int(m)] != 0;
 }
 
@@ -449,7 +567,7 @@ void Renderer::uploadPages(const PackReader& pack) {
 // one tile), each with its gutter; when every cell is resident, streaming ends.
 void Renderer::uploadTiles(uint64_t budgetBytes) {
   Gl& g = *gl_;
-  if (!g.streamer) return;
+  if (!g.streamer || g.residency) return;  // --gpu-budget: planBudget uploads
   const std::vector<uint32_t> fresh = g.streamer->takeDecoded();
   g.uploadQueue.insert(g.uploadQueue.end(), fresh.begin(), fresh.end());
   const PackReader& pack = *g.pack;
@@ -489,7 +607,7 @@ void Renderer::waitForTiles() {
   Gl& g = *gl_;
   if (!g.streamer) return;
   g.streamer->waitAll();
-  uploadTiles(UINT64_MAX);
+  uploadTiles(UINT64_MAX);  // --gpu-budget: the frames upload what they plan
 }
 
 Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing) {
@@ -573,7 +691,7 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   co.planePoint = s.clip.point - origin_;
   co.planeNormal = s.clip.normal.normalized();
   co.maxSteps = std::max(1, s.iterations);
-  co.cellResident = g.streamer ? g.resident.data() : nullptr;
+  co.cellResident = g.residency ? g.residency->residentFlags() : g.streamer ? g.resident.data() : nullptr;
   co.minSteps = std::min(co.minSteps, co.maxSteps);
   co.slicePixels = s.mode == RenderMode::kAuto ? s.autoPixels : 0;
   culler_->compute(cam, camRel, np, co, vis);
@@ -848,7 +966,11 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   const bool surface = s.mode != RenderMode::kPoints;
   VisibleSet vis;
   if (surface) uploadVisibility(cam, camRel, np, s, vis, st);
-  if (surface && g.streamer) g.streamer->want(vis.missing);  // the visible cells it lacks, nearest first
+  if (surface && g.residency) {
+    if (planBudget(cam, camRel, vis, st)) uploadVisibility(cam, camRel, np, s, vis, st);  // with this frame's uploads
+  } else if (surface && g.streamer) {
+    g.streamer->want(vis.missing);  // the visible cells it lacks, nearest first
+  }
   if (surface && s.countWork) glClearNamedBufferData(g.counterBuf, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, nullptr);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, g.counterBuf);
   if (g.mipBuf) {

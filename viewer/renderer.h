@@ -14,6 +14,7 @@
 #include "viewer/camera.h"
 #include "viewer/culling.h"
 #include "viewer/image_io.h"
+#include "viewer/tile_cache.h"
 
 namespace sa {
 
@@ -84,6 +85,11 @@ struct FrameStats {
   uint32_t submitted = 0, culled = 0, drawn = 0, inside = 0, splats = 0;
   uint32_t sliced = 0;         // auto mode: boxes drawn as slices
   uint32_t missing = 0;        // streamed packs: visible cells not drawn, their tiles not resident yet
+  // --gpu-budget: levels uploaded this frame, cells evicted, visible cells drawn coarser than their
+  // texels ask to fit the budget (by budgetBias levels), bytes of the cache in use.
+  uint32_t uploads = 0, evicted = 0, coarsened = 0;
+  int budgetBias = 0;
+  uint64_t residentBytes = 0;
   uint64_t points = 0;         // points mode: points drawn
   double cpuMs = 0;            // culling + submission + glFinish, wall clock
   double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)
@@ -115,7 +121,17 @@ class Renderer {
   // camera first, up to 64 MiB a frame; a cell whose tile is not resident yet is not drawn (a
   // window shows its first image at once, whatever the pack's size). The reader must then
   // outlive the renderer. Without streamPages the pack's pages must be in memory (PageLoad::kAll).
-  Status init(const PackReader& pack, bool streamPages = false);
+  // gpuBudget (bytes, needs streamPages): the page textures are a cache of that size, each
+  // visible cell's tile resident at the level its projected texels ask for (a level-0 texel
+  // under a pixel: a coarser level), all visible cells coarser still when they do not fit;
+  // cells not seen for longest are evicted. Draws parallax, slices, auto and points.
+  Status init(const PackReader& pack, bool streamPages = false, uint64_t gpuBudget = 0);
+  // The modes a --gpu-budget renderer draws as themselves (the others fall back to parallax).
+  static bool budgetMode(RenderMode m) {
+    return m == RenderMode::kParallax || m == RenderMode::kSlices || m == RenderMode::kAuto || m == RenderMode::kPoints;
+  }
+  // Streamed packs: tiles are still on their way (--gpu-budget: the last frame lacked a visible
+  // cell or a cell's wanted level, or uploaded one).
   bool tilesPending() const;
   uint32_t tilesResident() const;  // cells whose tiles are on the GPU
   // Blocks until every tile is decoded, then uploads them all (a streamed render that must be whole).
@@ -156,6 +172,11 @@ class Renderer {
     float pixelAngle = 0;  // vertical field of view over the height in pixels (radians)
   };
   void uploadPages(const PackReader& pack);
+  unsigned pageTexture(unsigned format, bool present, const uint8_t* fill, unsigned fillFormat, uint32_t w, uint32_t h,
+                       uint32_t layers);
+  Status initBudget(const PackReader& pack, uint64_t budget, int maxLayers);
+  void uploadLevel(const TileResidency::Upload& u);
+  bool planBudget(const Camera& cam, const Eigen::Vector3d& camRel, const VisibleSet& vis, FrameStats& st);
   void uploadTiles(uint64_t budgetBytes);
   Status ensureTargets(int width, int height);
   void uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double nearPlane, const RenderSettings& s,

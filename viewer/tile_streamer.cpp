@@ -4,8 +4,8 @@
 
 namespace sa {
 
-TileStreamer::TileStreamer(const PackReader& pack, unsigned threads)
-    : pack_(pack), cellCount_(uint32_t(pack.cells().size())), claimed_(cellCount_, 0) {
+TileStreamer::TileStreamer(const PackReader& pack, unsigned threads, std::function<void(uint32_t)> afterDecode)
+    : pack_(pack), cellCount_(uint32_t(pack.cells().size())), afterDecode_(std::move(afterDecode)), claimed_(cellCount_, 0) {
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   for (unsigned t = 0; t < threads; ++t) threads_.emplace_back([this] { work(); });
 }
@@ -51,6 +51,7 @@ void TileStreamer::work() {
     claimed_[cell] = 1;
     lock.unlock();
     Status s = pack_.decodeCell(cell);
+    if (afterDecode_) afterDecode_(cell);
     lock.lock();
     if (!s && error_) error_ = s;
     decoded_.push_back(cell);

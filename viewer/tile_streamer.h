@@ -6,6 +6,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -17,8 +18,10 @@ namespace sa {
 
 class TileStreamer {
  public:
-  // `pack` must outlive the streamer. threads: decoding threads (0: one per core).
-  explicit TileStreamer(const PackReader& pack, unsigned threads = 0);
+  // `pack` must outlive the streamer. threads: decoding threads (0: one per core). afterDecode,
+  // when given, runs on the decoding thread after each cell's tile is decoded and before the
+  // cell is handed out (the renderer's mip levels).
+  explicit TileStreamer(const PackReader& pack, unsigned threads = 0, std::function<void(uint32_t)> afterDecode = {});
   ~TileStreamer();
   TileStreamer(const TileStreamer&) = delete;
   TileStreamer& operator=(const TileStreamer&) = delete;
@@ -39,6 +42,7 @@ class TileStreamer {
   bool nextCell(uint32_t& cell);  // under mu_
   const PackReader& pack_;
   const uint32_t cellCount_;
+  std::function<void(uint32_t)> afterDecode_;
   mutable std::mutex mu_;
   std::condition_variable changed_;
   std::vector<uint8_t> claimed_;  // per cell: a thread has taken it

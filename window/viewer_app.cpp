@@ -749,7 +749,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   GLFWwindow* win = openWindow(opt, title, opt.vsync && script.empty());
   if (!win) return 1;
   int rc = 0;
-  st = s.renderer->init(s.pack, /*streamPages=*/true);
+  st = s.renderer->init(s.pack, /*streamPages=*/true, opt.gpuBudget);
   if (!st) {
     std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
     rc = 1;

@@ -1,6 +1,7 @@
 // `scanatlas view`: the interactive window (GLFW + Dear ImGui) around the one render core.
 // Also runs scripted sessions (--script) so the window path is tested under xvfb in CI.
 #pragma once
+#include <cstdint>
 #include <string>
 
 namespace sa {
@@ -12,6 +13,7 @@ struct ViewerOptions {
   int width = 1280, height = 800;
   bool vsync = true;
   bool quiet = false;
+  uint64_t gpuBudget = 0;        // --gpu-budget bytes (0: the whole atlas resident)
 };
 
 // Returns the process exit code (0 ok, 2 bad input, 1 internal); prints its own errors.

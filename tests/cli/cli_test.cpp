@@ -384,6 +384,18 @@ TEST(Cli, ConvertInfoAndMixedPackOnRealFiles) {
   EXPECT_GE(sj["stream"]["frames_to_complete"].get<int>(), 1);
   EXPECT_LE(sj["stream"]["first_frame_ms"].get<double>(), sj["stream"]["view_complete_ms"].get<double>());
   EXPECT_EQ(sj["configs"].size(), 1u);
+  // --gpu-budget: render settles within it, bench reports the cache per configuration.
+  CmdResult gr = runErr("render " + d.file("mix.hfa") + " --gpu-budget 16M --size 64x64 -o " + d.file("g.png"), d.file("g.err"));
+  ASSERT_EQ(gr.code, 0) << gr.err;
+  EXPECT_NE(gr.err.find("--gpu-budget: settled after"), std::string::npos) << gr.err;
+  EXPECT_TRUE(std::filesystem::exists(d.file("g.png")));
+  EXPECT_EQ(run("render " + d.file("mix.hfa") + " --gpu-budget 1M -o " + d.file("h.png")).code, 2);
+  EXPECT_FALSE(std::filesystem::exists(d.file("h.png")));
+  CmdResult gb = run("bench " + d.file("mix.hfa") + " --gpu-budget 16M --orbit 2 --size 64x64 --warmup 0 --frames 2 --json");
+  ASSERT_EQ(gb.code, 0) << gb.out;
+  auto gj = nlohmann::json::parse(gb.out);
+  EXPECT_EQ(gj["gpu_budget"].get<uint64_t>(), uint64_t(16) << 20);
+  EXPECT_LE(gj["configs"][0]["budget"]["resident_bytes"].get<double>(), double(uint64_t(16) << 20));
 
   // Failures: exit 2 with no output file and no temporary left behind.
   EXPECT_EQ(run("convert " + las + " -o " + d.file("x.las")).code, 2);  // no LAS writer

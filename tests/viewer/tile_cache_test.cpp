@@ -1,0 +1,144 @@
+// The --gpu-budget cache's parts without GL: the buddy allocator, the coarser tile levels and the
+// residency plan (levels from the texels' size on screen, the budget, eviction).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+
+#include "../common/render_util.h"
+#include "viewer/tile_cache.h"
+
+namespace sa {
+namespace {
+
+bool overlap(const BlockAllocator::Block& a, const BlockAllocator::Block& b) {
+  return a.layer == b.layer && a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+}
+
+TEST(BlockAllocator, BlocksNeverOverlapAndFreedSpaceMergesBack) {
+  BlockAllocator al(256, 2);
+  EXPECT_EQ(al.capacityTexels(), 2u * 256 * 256);
+  std::mt19937 rng(7);
+  std::vector<BlockAllocator::Block> live;
+  for (int round = 0; round < 2000; ++round) {
+    if (!live.empty() && (rng() % 3 == 0 || live.size() > 60)) {
+      const size_t k = rng() % live.size();
+      al.release(live[k]);
+      live.erase(live.begin() + ptrdiff_t(k));
+      continue;
+    }
+    const uint32_t w = 1 + rng() % 70, h = 1 + rng() % 70;
+    BlockAllocator::Block b;
+    if (!al.allocate(w, h, b)) continue;
+    EXPECT_GE(b.w, w);
+    EXPECT_GE(b.h, h);
+    EXPECT_LT(b.w, 2 * std::max(w, 1u) + 1);
+    EXPECT_LE(b.x + b.w, 256u);
+    EXPECT_LE(b.y + b.h, 256u);
+    for (const auto& o : live) ASSERT_FALSE(overlap(b, o));
+    live.push_back(b);
+  }
+  uint64_t used = 0;
+  for (const auto& b : live) used += uint64_t(b.w) * b.h;
+  EXPECT_EQ(al.usedTexels(), used);
+  for (const auto& b : live) al.release(b);
+  EXPECT_EQ(al.usedTexels(), 0u);
+  // Everything merged back: a whole layer fits again, twice, and a third does not.
+  BlockAllocator::Block a, b, c;
+  EXPECT_TRUE(al.allocate(256, 256, a));
+  EXPECT_TRUE(al.allocate(200, 256, b));
+  EXPECT_FALSE(al.allocate(1, 1, c));
+}
+
+TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  PackReader p;
+  ASSERT_TRUE(p.open(test::packPoints(d, pts, nrm, "s")).isOk());
+  for (uint32_t i = 0; i < p.cells().size(); ++i) {
+    const CellRecord& c = p.cells()[i];
+    const std::vector<TileImage> m = buildMips(p, i);
+    ASSERT_FALSE(m.empty());
+    EXPECT_EQ(std::max(m.back().w, m.back().h), 1u);
+    for (uint32_t k = 0; k < m.size(); ++k) {
+      uint32_t w, h;
+      TileResidency::levelSize(c, k + 1, w, h);
+      EXPECT_EQ(m[k].w, w);
+      EXPECT_EQ(m[k].h, h);
+      EXPECT_EQ(m[k].heights.size(), size_t(w + 2) * (h + 2));
+    }
+    // Level 1 texel (0, 0): covered where half of level 0's first 2 x 2 are, their mean.
+    double sum = 0;
+    int n = 0, under = 0;
+    for (int j = 0; j < std::min<int>(2, c.tileH); ++j)
+      for (int k = 0; k < std::min<int>(2, c.tileW); ++k, ++under)
+        if (uint16_t v = p.texel(c, k, j)) sum += v, ++n;
+    const uint16_t got = m[0].heights[size_t(1) * (m[0].w + 2) + 1];
+    if (2 * n < under) EXPECT_EQ(got, 0);
+    else EXPECT_NEAR(got, sum / n, 0.51);
+    // The gutter repeats the edge.
+    EXPECT_EQ(m[0].heights[0], m[0].heights[size_t(1) * (m[0].w + 2) + 1]);
+  }
+}
+
+TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
+  test::TempDir d;
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  PackReader p;
+  ASSERT_TRUE(p.open(test::packPoints(d, pts, nrm, "s")).isOk());
+  const uint32_t n = uint32_t(p.cells().size());
+  std::vector<uint32_t> all(n);
+  for (uint32_t i = 0; i < n; ++i) all[i] = i;
+  std::vector<uint8_t> decoded(n, 1);
+  const Eigen::Vector3d eye(0, 0, 4);  // relative to the pack origin, which is near the centre
+  // Near, with room for everything: every cell at level 0.
+  TileResidency big(p.cells(), 512, 64, 10);
+  auto f = big.plan(all, decoded.data(), eye - Eigen::Vector3d(p.meta().origin), 1e6, UINT64_MAX);
+  EXPECT_EQ(f.bias, 0);
+  EXPECT_EQ(f.uploads.size(), n);
+  for (uint32_t i = 0; i < n; ++i) EXPECT_EQ(big.level(i), 0);
+  // Far (a few pixels per cell): coarser levels, fewer bytes.
+  const uint64_t nearBytes = big.residentBytes();
+  f = big.plan(all, decoded.data(), eye - Eigen::Vector3d(p.meta().origin), 20, UINT64_MAX);
+  for (uint32_t i = 0; i < n; ++i) EXPECT_GT(big.level(i), 0) << i;
+  EXPECT_LT(big.residentBytes(), nearBytes);
+  // A cache too small for level 0: all coarser, within its capacity; not decoded: waiting.
+  TileResidency small(p.cells(), 256, 1, 10);
+  decoded[0] = 0;
+  f = small.plan(all, decoded.data(), eye - Eigen::Vector3d(p.meta().origin), 1e6, UINT64_MAX);
+  EXPECT_GT(f.bias, 0);
+  EXPECT_GT(f.coarsened, 0u);
+  EXPECT_EQ(f.waiting, 1u);
+  EXPECT_EQ(small.level(0), -1);
+  EXPECT_LE(small.residentBytes(), small.capacityBytes());
+  // Cells no longer seen make room for the ones now seen.
+  decoded[0] = 1;
+  uint32_t x = 0;  // the cell with the largest tile gets a layer of its own block's size
+  for (uint32_t i = 0; i < n; ++i)
+    if (p.cells()[i].tileW * p.cells()[i].tileH > p.cells()[x].tileW * p.cells()[x].tileH) x = i;
+  auto pow2 = [](uint32_t v) {
+    uint32_t q = 1;
+    while (q < v) q <<= 1;
+    return q;
+  };
+  const uint32_t bw = pow2(p.cells()[x].tileW + 2u), bh = pow2(p.cells()[x].tileH + 2u);
+  // One cell a view, each cell twice: every block at most a quarter of the layer, all together more.
+  TileResidency tiny(p.cells(), 2 * std::max(bw, bh), 1, 10);
+  uint64_t blocks = 0;
+  for (uint32_t i = 0; i < n; ++i) blocks += uint64_t(pow2(p.cells()[i].tileW + 2u)) * pow2(p.cells()[i].tileH + 2u) * 10;
+  uint32_t evicted = 0;
+  for (uint32_t k = 0; k < 2 * n; ++k) {
+    const std::vector<uint32_t> one = {k % n};
+    f = tiny.plan(one, decoded.data(), eye - Eigen::Vector3d(p.meta().origin), 1e6, UINT64_MAX);
+    EXPECT_EQ(tiny.level(k % n), 0) << k;
+    EXPECT_LE(tiny.residentBytes(), tiny.capacityBytes());
+    evicted += f.evicted;
+  }
+  std::printf("%u cells, level-0 blocks %.2fx the cache: %u evictions\n", n, double(blocks) / tiny.capacityBytes(), evicted);
+  if (blocks > tiny.capacityBytes()) EXPECT_GT(evicted, 0u);
+}
+
+}  // namespace
+}  // namespace sa

@@ -1,0 +1,301 @@
+#include "viewer/tile_cache.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace sa {
+namespace {
+
+uint32_t nextPow2(uint32_t v) {
+  uint32_t p = 1;
+  while (p < v) p <<= 1;
+  return p;
+}
+
+size_t at(const TileImage& t, int i, int j) { return size_t(j + 1) * (t.w + 2) + size_t(i + 1); }
+
+// The gutter: the edge texels repeated (FORMAT.md).
+void fillGutter(TileImage& t, bool normals, bool rgba) {
+  auto copy = [&](int fi, int fj, int ti, int tj) {
+    t.heights[at(t, ti, tj)] = t.heights[at(t, fi, fj)];
+    if (normals) std::copy_n(&t.normals[at(t, fi, fj) * kNormalBytes], kNormalBytes, &t.normals[at(t, ti, tj) * kNormalBytes]);
+    if (rgba) std::copy_n(&t.rgba[at(t, fi, fj) * 4], 4, &t.rgba[at(t, ti, tj) * 4]);
+  };
+  const int W = int(t.w), H = int(t.h);
+  for (int i = 0; i < W; ++i) {
+    copy(i, 0, i, -1);
+    copy(i, H - 1, i, H);
+  }
+  for (int j = -1; j <= H; ++j) {
+    copy(0, std::clamp(j, 0, H - 1), -1, j);
+    copy(W - 1, std::clamp(j, 0, H - 1), W, j);
+  }
+}
+
+TileImage blank(uint32_t w, uint32_t h, bool normals, bool rgba) {
+  TileImage t;
+  t.w = w;
+  t.h = h;
+  const size_t n = size_t(w + 2) * (h + 2);
+  t.heights.assign(n, 0);
+  if (normals) t.normals.assign(n * kNormalBytes, 0);
+  if (rgba) t.rgba.assign(n * 4, 0);
+  return t;
+}
+
+// Each coarse texel from the (up to) 2 x 2 fine texels under it: covered where at least half of
+// them are, then the covered ones' mean.
+TileImage halve(const TileImage& s) {
+  const bool nn = !s.normals.empty(), cc = !s.rgba.empty();
+  TileImage t = blank((s.w + 1) / 2, (s.h + 1) / 2, nn, cc);
+  for (uint32_t j = 0; j < t.h; ++j)
+    for (uint32_t i = 0; i < t.w; ++i) {
+      double h = 0, n[3] = {0, 0, 0}, c[4] = {0, 0, 0, 0};
+      int k = 0, under = 0;
+      for (uint32_t b = 0; b < 2; ++b)
+        for (uint32_t a = 0; a < 2; ++a) {
+          const uint32_t fi = 2 * i + a, fj = 2 * j + b;
+          if (fi >= s.w || fj >= s.h) continue;
+          ++under;
+          const size_t f = at(s, int(fi), int(fj));
+          if (s.heights[f] == 0) continue;
+          ++k;
+          h += s.heights[f];
+          if (nn) {
+            double d[3];
+            decodeNormal(&s.normals[f * kNormalBytes], d);
+            for (int q = 0; q < 3; ++q) n[q] += d[q];
+          }
+          if (cc)
+            for (int q = 0; q < 4; ++q) c[q] += s.rgba[f * 4 + q];
+        }
+      if (2 * k < under) continue;  // covered where at least half the texels under it are: edges stay put
+      const size_t o = at(t, int(i), int(j));
+      t.heights[o] = uint16_t(std::clamp(std::lround(h / k), 1L, 65535L));
+      if (nn) {
+        const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (len > 0) encodeNormal(n[0] / len, n[1] / len, n[2] / len, &t.normals[o * kNormalBytes]);
+        else std::copy_n(&s.normals[at(s, int(2 * i), int(2 * j)) * kNormalBytes], kNormalBytes, &t.normals[o * kNormalBytes]);
+      }
+      if (cc)
+        for (int q = 0; q < 4; ++q) t.rgba[o * 4 + q] = uint8_t(std::lround(c[q] / k));
+    }
+  fillGutter(t, nn, cc);
+  return t;
+}
+
+}  // namespace
+
+std::vector<TileImage> buildMips(const PackReader& pack, uint32_t cell) {
+  const CellRecord& c = pack.cells()[cell];
+  const uint32_t PW = pack.meta().pageWidth;
+  const bool nn = pack.hasNormals(), cc = pack.hasColor();
+  TileImage t = blank(c.tileW, c.tileH, nn, cc);
+  for (int j = -1; j <= int(c.tileH); ++j)
+    for (int i = -1; i <= int(c.tileW); ++i) {
+      const uint64_t p = uint64_t(int64_t(c.tileY) + j) * PW + uint64_t(int64_t(c.tileX) + i);
+      const size_t o = at(t, i, j);
+      t.heights[o] = pack.heightPage(c.page)[p];
+      if (nn) std::copy_n(pack.normalPage(c.page) + p * kNormalBytes, kNormalBytes, &t.normals[o * kNormalBytes]);
+      if (cc) std::copy_n(pack.colorPage(c.page) + p * 4, 4, &t.rgba[o * 4]);
+    }
+  std::vector<TileImage> out;
+  while (t.w > 1 || t.h > 1) {
+    t = halve(t);
+    out.push_back(t);
+  }
+  return out;
+}
+
+BlockAllocator::BlockAllocator(uint32_t size, uint32_t layers) : size_(size) {
+  for (uint32_t l = 0; l < layers; ++l) {
+    roots_.push_back(int(nodes_.size()));
+    nodes_.push_back({l, 0, 0, size, size, -1, -1, false});
+  }
+}
+
+// The smallest free leaf under n that holds w x h, or -1.
+int BlockAllocator::find(int n, uint32_t w, uint32_t h) const {
+  const Node& d = nodes_[n];
+  if (d.w < w || d.h < h) return -1;
+  if (d.child < 0) return d.used ? -1 : n;
+  const int a = find(d.child, w, h), b = find(d.child + 1, w, h);
+  if (a < 0 || b < 0) return a < 0 ? b : a;
+  return uint64_t(nodes_[a].w) * nodes_[a].h <= uint64_t(nodes_[b].w) * nodes_[b].h ? a : b;
+}
+
+bool BlockAllocator::allocate(uint32_t w, uint32_t h, Block& out) {
+  const uint32_t bw = nextPow2(std::max(w, 1u)), bh = nextPow2(std::max(h, 1u));
+  int n = -1;
+  for (int r : roots_) {
+    const int f = find(r, bw, bh);
+    if (f >= 0 && (n < 0 || uint64_t(nodes_[f].w) * nodes_[f].h < uint64_t(nodes_[n].w) * nodes_[n].h)) n = f;
+  }
+  if (n < 0) return false;
+  for (;;) {  // split down to the block's size, the longer side first
+    const Node d = nodes_[n];
+    const bool splitW = d.w / 2 >= bw && (d.w >= d.h || d.h / 2 < bh);
+    const bool splitH = !splitW && d.h / 2 >= bh;
+    if (!splitW && !splitH) break;
+    int c;
+    if (!freeNodes_.empty()) {
+      c = freeNodes_.back();
+      freeNodes_.pop_back();
+    } else {
+      c = int(nodes_.size());
+      nodes_.resize(nodes_.size() + 2);
+    }
+    const uint32_t hw = splitW ? d.w / 2 : d.w, hh = splitW ? d.h : d.h / 2;
+    nodes_[c] = {d.layer, d.x, d.y, hw, hh, n, -1, false};
+    nodes_[c + 1] = {d.layer, splitW ? d.x + hw : d.x, splitW ? d.y : d.y + hh, hw, hh, n, -1, false};
+    nodes_[n].child = c;
+    n = c;
+  }
+  Node& d = nodes_[n];
+  d.used = true;
+  used_ += uint64_t(d.w) * d.h;
+  out = {d.layer, d.x, d.y, d.w, d.h, n};
+  return true;
+}
+
+void BlockAllocator::release(const Block& b) {
+  if (b.node < 0 || !nodes_[b.node].used) return;
+  nodes_[b.node].used = false;
+  used_ -= uint64_t(b.w) * b.h;
+  for (int p = nodes_[b.node].parent; p >= 0; p = nodes_[p].parent) {  // merge free buddies upward
+    const int c = nodes_[p].child;
+    const Node &a = nodes_[c], &d = nodes_[c + 1];
+    if (a.child >= 0 || d.child >= 0 || a.used || d.used) break;
+    freeNodes_.push_back(c);
+    nodes_[p].child = -1;
+  }
+}
+
+TileResidency::TileResidency(std::span<const CellRecord> cells, uint32_t layerSize, uint32_t layers, uint64_t texelBytes)
+    : cells_(cells),
+      alloc_(layerSize, layers),
+      texelBytes_(texelBytes),
+      level_(cells.size(), -1),
+      flags_(cells.size(), 0),
+      block_(cells.size()),
+      lastSeen_(cells.size(), 0),
+      pos_(cells.size(), 0) {
+  for (const CellRecord& c : cells) {
+    const Eigen::Vector3d o(c.origin), u(c.u), v(c.v), w(c.w);
+    center_.push_back(o + u * (c.box[0] + c.box[1]) / 2 + v * (c.box[2] + c.box[3]) / 2 + w * (c.box[4] + c.box[5]) / 2);
+    radius_.push_back(0.5 * std::sqrt(std::pow(c.box[1] - c.box[0], 2) + std::pow(c.box[3] - c.box[2], 2) +
+                                      std::pow(c.box[5] - c.box[4], 2)));
+  }
+}
+
+void TileResidency::levelSize(const CellRecord& c, uint32_t level, uint32_t& w, uint32_t& h) {
+  w = c.tileW;
+  h = c.tileH;
+  for (uint32_t k = 0; k < level; ++k) {
+    w = (w + 1) / 2;
+    h = (h + 1) / 2;
+  }
+}
+
+uint32_t TileResidency::levels(uint32_t cell) const {
+  uint32_t w = cells_[cell].tileW, h = cells_[cell].tileH, n = 1;
+  while (w > 1 || h > 1) {
+    w = (w + 1) / 2;
+    h = (h + 1) / 2;
+    ++n;
+  }
+  return n;
+}
+
+uint64_t TileResidency::blockTexels(uint32_t cell, uint32_t level) const {
+  uint32_t w, h;
+  levelSize(cells_[cell], level, w, h);
+  return uint64_t(nextPow2(w + 2)) * nextPow2(h + 2);
+}
+
+void TileResidency::drop(uint32_t cell) {
+  if (level_[cell] < 0) return;
+  alloc_.release(block_[cell]);
+  level_[cell] = -1;
+  flags_[cell] = 0;
+  const uint32_t p = pos_[cell], last = resident_.back();
+  resident_[p] = last;
+  pos_[last] = p;
+  resident_.pop_back();
+}
+
+// A block of w x h, evicting the cells least recently seen (none seen this frame) until it fits.
+bool TileResidency::makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, uint32_t& evicted) {
+  while (!alloc_.allocate(w, h, out)) {
+    int victim = -1;
+    for (uint32_t c : resident_)
+      if (lastSeen_[c] < frame_ && (victim < 0 || lastSeen_[c] < lastSeen_[uint32_t(victim)])) victim = int(c);
+    if (victim < 0) return false;
+    drop(uint32_t(victim));
+    ++evicted;
+  }
+  return true;
+}
+
+TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, const uint8_t* decoded,
+                                         const Eigen::Vector3d& eyeRel, double focalPx, uint64_t maxUploadBytes) {
+  ++frame_;
+  Frame out;
+  struct Want {
+    uint32_t cell, level;
+    double texelPx;
+  };
+  std::vector<Want> wants;
+  wants.reserve(visible.size());
+  for (uint32_t cell : visible) {
+    const CellRecord& c = cells_[cell];
+    lastSeen_[cell] = frame_;
+    const double dist = std::max((center_[cell] - eyeRel).norm() - radius_[cell], radius_[cell] * 1e-3 + 1e-30);
+    const double texel = std::max((c.box[1] - c.box[0]) / c.tileW, (c.box[3] - c.box[2]) / c.tileH);
+    const double px = texel * focalPx / dist;  // a level-0 texel's size on screen, in pixels
+    // The coarsest level whose texels stay under a pixel.
+    const uint32_t lv = px >= 1 ? 0 : uint32_t(std::floor(std::log2(1 / std::max(px, 1e-9))));
+    wants.push_back({cell, std::min(lv, levels(cell) - 1), px});
+  }
+  // Coarser everywhere until the visible set fits in 70 % of the cache (the rest: fragmentation).
+  auto level = [&](const Want& w) { return std::min(w.level + uint32_t(out.bias), levels(w.cell) - 1); };
+  for (;; ++out.bias) {
+    uint64_t texels = 0;
+    for (const Want& w : wants) texels += blockTexels(w.cell, level(w));
+    if (texels * 10 <= alloc_.capacityTexels() * 7 || out.bias >= 24) break;
+  }
+  std::sort(wants.begin(), wants.end(), [](const Want& a, const Want& b) { return a.texelPx > b.texelPx; });
+  uint64_t bytes = 0;
+  for (const Want& w : wants) {
+    const uint32_t lv = level(w);
+    if (lv > w.level) ++out.coarsened;
+    if (level_[w.cell] == int(lv)) continue;
+    if (!decoded[w.cell] || bytes >= maxUploadBytes) {
+      ++out.waiting;
+      continue;
+    }
+    uint32_t lw, lh;
+    levelSize(cells_[w.cell], lv, lw, lh);
+    BlockAllocator::Block b;
+    bool ok = makeRoom(lw + 2, lh + 2, b, out.evicted);
+    if (!ok && level_[w.cell] >= 0 && int(lv) > level_[w.cell]) {  // going coarser: its own block makes room
+      drop(w.cell);
+      ok = makeRoom(lw + 2, lh + 2, b, out.evicted);
+    }
+    if (!ok) {
+      ++out.waiting;
+      continue;
+    }
+    drop(w.cell);
+    level_[w.cell] = int(lv);
+    flags_[w.cell] = 1;
+    block_[w.cell] = b;
+    pos_[w.cell] = uint32_t(resident_.size());
+    resident_.push_back(w.cell);
+    out.uploads.push_back({w.cell, lv, b});
+    bytes += uint64_t(lw + 2) * (lh + 2) * texelBytes_;
+  }
+  return out;
+}
+
+}  // namespace sa

@@ -1,0 +1,107 @@
+// A GPU budget for a pack's tiles (--gpu-budget): which level of each cell's tile is resident in
+// a fixed cache of texture layers, and where. Coarser levels (each half the texels along each
+// side, covering the same box, so the shaders draw them unchanged) serve cells whose texels
+// would be under a pixel; when the visible set still does not fit, every visible cell goes one
+// level coarser until it does. Blocks of the cache are handed out by a buddy allocator; cells
+// not visible this frame are evicted least recently seen first. No GL here: the renderer
+// uploads what plan() returns.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "atlas/pack_file.h"
+
+namespace sa {
+
+// One level of a cell's tile with its one-texel gutter (the edge repeated), row-major,
+// (w + 2) x (h + 2) texels.
+struct TileImage {
+  uint32_t w = 0, h = 0;  // interior texels
+  std::vector<uint16_t> heights;
+  std::vector<uint8_t> normals;  // kNormalBytes a texel, empty when the pack has none
+  std::vector<uint8_t> rgba;     // empty when the pack has no colour
+};
+
+// Levels 1, 2, ... of cell i's tile (level 0 is the pack's), down to one texel on the longer
+// side: a coarse texel is covered where at least half the texels under it are (so coverage
+// edges stay where they were), its height the mean of the covered ones, normals the normalized mean, colours the mean. Needs cell i's tile decoded.
+std::vector<TileImage> buildMips(const PackReader& pack, uint32_t i);
+
+// A buddy allocator of power-of-two rectangles over `layers` square layers of `size` texels.
+class BlockAllocator {
+ public:
+  struct Block {
+    uint32_t layer = 0, x = 0, y = 0, w = 0, h = 0;
+    int node = -1;
+  };
+  BlockAllocator(uint32_t size, uint32_t layers);
+  // A block of at least w x h texels (rounded up to powers of two); false when none is free.
+  bool allocate(uint32_t w, uint32_t h, Block& out);
+  void release(const Block& b);
+  uint64_t usedTexels() const { return used_; }
+  uint64_t capacityTexels() const { return uint64_t(size_) * size_ * roots_.size(); }
+
+ private:
+  struct Node {
+    uint32_t layer, x, y, w, h;
+    int parent, child;  // child: the first of two (-1: a leaf)
+    bool used;
+  };
+  int find(int n, uint32_t w, uint32_t h) const;
+  uint32_t size_;
+  std::vector<int> roots_;
+  std::vector<Node> nodes_;
+  std::vector<int> freeNodes_;  // recycled node slots (pairs)
+  uint64_t used_ = 0;
+};
+
+// Per cell: the resident level and its block; per frame: what to upload.
+class TileResidency {
+ public:
+  // texelBytes: bytes of one texel over every page channel.
+  TileResidency(std::span<const CellRecord> cells, uint32_t layerSize, uint32_t layers, uint64_t texelBytes);
+  struct Upload {
+    uint32_t cell = 0, level = 0;
+    BlockAllocator::Block block;
+  };
+  struct Frame {
+    std::vector<Upload> uploads;   // in priority order, blocks allocated (old ones released)
+    uint32_t evicted = 0;          // cells that lost their block to make room
+    uint32_t coarsened = 0;        // visible cells wanted coarser than their texels ask, to fit the budget
+    uint32_t waiting = 0;          // visible cells not at their wanted level after this frame's uploads
+    int bias = 0;                  // levels every visible cell went coarser to fit
+  };
+  // visible: the cells the frame draws or lacks; decoded[cell]: its tile and mips are in memory.
+  // eyeRel: the camera relative to the pack origin; focalPx: pixels per unit of depth.
+  Frame plan(std::span<const uint32_t> visible, const uint8_t* decoded, const Eigen::Vector3d& eyeRel, double focalPx,
+             uint64_t maxUploadBytes);
+  int level(uint32_t cell) const { return level_[cell]; }   // -1: not resident
+  uint32_t levels(uint32_t cell) const;                     // levels the cell has (1 + its mips)
+  uint64_t residentBytes() const { return alloc_.usedTexels() * texelBytes_; }
+  uint64_t capacityBytes() const { return alloc_.capacityTexels() * texelBytes_; }
+  // The interior size of cell c's tile at a level.
+  static void levelSize(const CellRecord& c, uint32_t level, uint32_t& w, uint32_t& h);
+  const uint8_t* residentFlags() const { return flags_.data(); }
+
+ private:
+  uint64_t blockTexels(uint32_t cell, uint32_t level) const;
+  bool makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, uint32_t& evicted);
+  void drop(uint32_t cell);
+  std::span<const CellRecord> cells_;
+  std::vector<Eigen::Vector3d> center_;
+  std::vector<double> radius_;
+  BlockAllocator alloc_;
+  uint64_t texelBytes_;
+  std::vector<int> level_;
+  std::vector<uint8_t> flags_;  // level_ >= 0, for the culler
+  std::vector<BlockAllocator::Block> block_;
+  std::vector<uint64_t> lastSeen_;
+  std::vector<uint32_t> resident_;  // cells holding a block
+  std::vector<uint32_t> pos_;       // a resident cell's index in resident_
+  uint64_t frame_ = 0;
+};
+
+}  // namespace sa
