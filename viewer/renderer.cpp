@@ -161,6 +161,7 @@ struct Renderer::Gl {
   GLint ssboAlign = 256;  // GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT
   int fbW = 0, fbH = 0;
   ~Gl() {
+    streamer.reset();  // its threads write mips and read the pack: join them before anything goes
     for (GLuint p : {splat, points, edl, boxes, grooveFlatFront, grooveFlatInside})
       if (p) glDeleteProgram(p);
     for (int m = 0; m < kRenderModes; ++m)

@@ -11,6 +11,13 @@
 namespace sa {
 namespace {
 
+// A 20000-point sphere's pack (8 cells) in d.
+std::string packSphere(const test::TempDir& d) {
+  std::vector<Eigen::Vector3d> pts, nrm;
+  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
+  return test::packPoints(d, pts, nrm, "s");
+}
+
 bool overlap(const BlockAllocator::Block& a, const BlockAllocator::Block& b) {
   return a.layer == b.layer && a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
 }
@@ -52,10 +59,8 @@ TEST(BlockAllocator, BlocksNeverOverlapAndFreedSpaceMergesBack) {
 
 TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
   test::TempDir d;
-  std::vector<Eigen::Vector3d> pts, nrm;
-  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
   PackReader p;
-  ASSERT_TRUE(p.open(test::packPoints(d, pts, nrm, "s")).isOk());
+  ASSERT_TRUE(p.open(packSphere(d)).isOk());
   for (uint32_t i = 0; i < p.cells().size(); ++i) {
     const CellRecord& c = p.cells()[i];
     const std::vector<TileImage> m = buildMips(p, i);
@@ -84,10 +89,8 @@ TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
 
 TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
   test::TempDir d;
-  std::vector<Eigen::Vector3d> pts, nrm;
-  test::spherePoints(20000, 1.0, Eigen::Vector3d::Zero(), pts, nrm);
   PackReader p;
-  ASSERT_TRUE(p.open(test::packPoints(d, pts, nrm, "s")).isOk());
+  ASSERT_TRUE(p.open(packSphere(d)).isOk());
   const uint32_t n = uint32_t(p.cells().size());
   std::vector<uint32_t> all(n);
   for (uint32_t i = 0; i < n; ++i) all[i] = i;
