@@ -17,7 +17,7 @@ export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 alloc=max_allocation_size_mb=2048:allocator_may_return_null=1
 # Tests that create a GL context (directly or through the scanatlas binary; FarReal is
 # parameterized, so its names start with the instantiation).
-gl='^(RenderTest|Accuracy|Stress|ExactGl|VdmGl|GdmGl|SlicesGl|AutoGl|GroovesGl|Cli|Window)\.|/FarReal\.'
+gl='^(RenderTest|StreamingTest|Accuracy|Stress|ExactGl|VdmGl|GdmGl|SlicesGl|AutoGl|GroovesGl|Cli|Window)\.|/FarReal\.'
 # Left to the Release run (they measure accuracy, not memory safety, and take too long under
 # ASan): Vdm.OffGrid's bakes, and the gdm direction functions of the dragon's 1090 forced cells
 # (over 10 minutes; the bunny's run here).
