@@ -382,6 +382,8 @@ Status PackReader::open(const std::string& path, PageLoad pages) {
       return Status::badInput(path + ": cell " + std::to_string(i) + " has an inverted box");
   }
   if (!compressed || pages == PageLoad::kNone) return Status::ok();
+  SA_RETURN_IF_ERROR(checkTileIndexes());
+  if (pages == PageLoad::kTiles) return Status::ok();
   SA_RETURN_IF_ERROR(reservePages());
   if (pages == PageLoad::kOnDemand) {
     onDemand_ = true;
@@ -401,27 +403,38 @@ Status PackReader::OwnedPages::allocate(uint64_t bytes) {
   return data ? Status::ok() : Status::badInput("not enough memory");
 }
 
-// Memory for the decoded pages of every compressed section, after checking that each indexes
-// the pack's tiles.
-Status PackReader::reservePages() {
+namespace {
+struct PageSection {
+  const char* id;
+  TexelLayout layout;
+  uint32_t flag;  // 0: always there
+};
+constexpr PageSection kPageSections[] = {
+    {"HGTZ", kHeightTexels, 0}, {"NRMZ", kNormalTexels, kPackHasNormals}, {"COLZ", kColorTexels, kPackHasColor}};
+}  // namespace
+
+// That each compressed section the pack has indexes its tiles.
+Status PackReader::checkTileIndexes() {
   const uint32_t n = meta_->cellCount;
-  struct Sec {
-    const char* id;
-    TexelLayout layout;
-    OwnedPages* own;
-    bool wanted;
-  };
-  const Sec secs[] = {{"HGTZ", kHeightTexels, &hOwn_, true},
-                      {"NRMZ", kNormalTexels, &nOwn_, (meta_->flags & kPackHasNormals) != 0},
-                      {"COLZ", kColorTexels, &cOwn_, (meta_->flags & kPackHasColor) != 0}};
-  for (const Sec& x : secs) {
-    if (!x.wanted) continue;
+  for (const PageSection& x : kPageSections) {
+    if (x.flag && !(meta_->flags & x.flag)) continue;
     const std::span<const uint8_t> sec = section(x.id);
     uint32_t count = 0;
     if (sec.size() >= 4) std::memcpy(&count, sec.data(), 4);
     if (sec.size() < kTileIndexHead + kTileIndexEntry * uint64_t(n) || count != n)
       return Status::badInput(path_ + ": section " + x.id + " does not index the pack's " + std::to_string(n) + " tiles");
-    if (!x.own->allocate(pageTexels() * meta_->pageCount * x.layout.texelBytes()))
+  }
+  tilesIndexed_ = true;
+  return Status::ok();
+}
+
+// Memory for the decoded pages of every compressed section (their indexes checked).
+Status PackReader::reservePages() {
+  OwnedPages* own[] = {&hOwn_, &nOwn_, &cOwn_};
+  for (int k = 0; k < 3; ++k) {
+    const PageSection& x = kPageSections[k];
+    if (x.flag && !(meta_->flags & x.flag)) continue;
+    if (!own[k]->allocate(pageTexels() * meta_->pageCount * x.layout.texelBytes()))
       return Status::badInput(path_ + ": not enough memory to decode " + x.id);
   }
   hght_ = reinterpret_cast<const uint16_t*>(hOwn_.data);
@@ -430,19 +443,48 @@ Status PackReader::reservePages() {
   return Status::ok();
 }
 
-// Decodes cell i's tile of a compressed section (its index checked by reservePages) into `pages`.
-Status PackReader::decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const {
+// Decodes cell i's tile of a compressed section (its index checked) into region r of `out`,
+// `stride` texels a row.
+Status PackReader::decodeTileOf(const char id[4], TexelLayout layout, uint8_t* out, uint32_t stride, TileRegion r,
+                                uint32_t i) const {
   const std::span<const uint8_t> sec = section(id);
   uint64_t e[2];
   std::memcpy(e, sec.data() + kTileIndexHead + kTileIndexEntry * uint64_t(i), sizeof e);
-  const CellRecord& c = cells_[i];
-  uint8_t* page = pages + uint64_t(c.page) * pageTexels() * layout.texelBytes();
-  Status s = e[0] > sec.size() || e[1] > sec.size() - e[0]
-                 ? Status::badInput("lies outside the section")
-                 : decodeTile(sec.subspan(e[0], e[1]), page, meta_->pageWidth, gutteredTile(c), layout);
+  Status s = e[0] > sec.size() || e[1] > sec.size() - e[0] ? Status::badInput("lies outside the section")
+                                                           : decodeTile(sec.subspan(e[0], e[1]), out, stride, r, layout);
   if (s) return s;
   return Status::badInput(path_ + ": section " + std::string(id, 4) + ", tile of cell " + std::to_string(i) + ": " +
                           s.message());
+}
+
+// Cell i's tile into its place in `pages`.
+Status PackReader::decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const {
+  const CellRecord& c = cells_[i];
+  uint8_t* page = pages + uint64_t(c.page) * pageTexels() * layout.texelBytes();
+  return decodeTileOf(id, layout, page, meta_->pageWidth, gutteredTile(c), i);
+}
+
+Status PackReader::decodeCellInto(uint32_t i, uint16_t* heights, uint8_t* normals, uint8_t* rgba) const {
+  if (i >= meta_->cellCount) return Status::internal(path_ + ": decodeCellInto(" + std::to_string(i) + ") past the cells");
+  const CellRecord& c = cells_[i];
+  const TileRegion g = gutteredTile(c), at{0, 0, g.w, g.h};
+  if (!hasNormals()) normals = nullptr;
+  if (!hasColor()) rgba = nullptr;
+  if (compressedPages() && !(hght_ && !onDemand_)) {  // from the coded sections
+    if (!tilesIndexed_) return Status::internal(path_ + ": decodeCellInto on a pack opened for its metadata only");
+    SA_RETURN_IF_ERROR(decodeTileOf("HGTZ", kHeightTexels, reinterpret_cast<uint8_t*>(heights), g.w, at, i));
+    if (normals) SA_RETURN_IF_ERROR(decodeTileOf("NRMZ", kNormalTexels, normals, g.w, at, i));
+    if (rgba) SA_RETURN_IF_ERROR(decodeTileOf("COLZ", kColorTexels, rgba, g.w, at, i));
+    return Status::ok();
+  }
+  const uint32_t PW = meta_->pageWidth;  // raw (mapped) or decoded pages: a copy
+  for (uint32_t j = 0; j < g.h; ++j) {
+    const uint64_t p = uint64_t(g.y + j) * PW + g.x;
+    std::memcpy(heights + size_t(j) * g.w, heightPage(c.page) + p, size_t(g.w) * 2);
+    if (normals) std::memcpy(normals + size_t(j) * g.w * kNormalBytes, normalPage(c.page) + p * kNormalBytes, size_t(g.w) * kNormalBytes);
+    if (rgba) std::memcpy(rgba + size_t(j) * g.w * 4, colorPage(c.page) + p * 4, size_t(g.w) * 4);
+  }
+  return Status::ok();
 }
 
 Status PackReader::decodeCell(uint32_t i) const {

@@ -83,6 +83,8 @@ enum class PageLoad {
   kAll,       // decode every tile at open, on all cores
   kNone,      // metadata only: the page accessors return null
   kOnDemand,  // page memory reserved (untouched until written), each cell's tile decoded by decodeCell
+  kTiles,     // no page memory (packs larger than RAM): the page accessors return null, each cell's
+              // tile is decoded into the caller's memory by decodeCellInto
 };
 
 class PackReader {
@@ -100,6 +102,10 @@ class PackReader {
   // tile's texels are zero. Thread-safe for different cells; a no-op when the pages are raw or
   // already decoded. An error names the file, the section and the cell.
   Status decodeCell(uint32_t i) const;
+  // Cell i's tile with its gutter, (tileW + 2) x (tileH + 2) texels row-major, into the caller's
+  // buffers (normals: kNormalBytes a texel, rgba: 4; either may be null and is then not written;
+  // the pack's own channels only). Any PageLoad but kNone for compressed pages; thread-safe.
+  Status decodeCellInto(uint32_t i, uint16_t* heights, uint8_t* normals, uint8_t* rgba) const;
   // Whether tiles wait for decodeCell (compressed pages opened with PageLoad::kOnDemand).
   bool onDemand() const { return onDemand_; }
   // Checks the checksums of the large sections too (reads every byte).
@@ -149,7 +155,9 @@ class PackReader {
     ~OwnedPages();
     Status allocate(uint64_t bytes);
   };
+  Status checkTileIndexes();
   Status reservePages();
+  Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* out, uint32_t stride, TileRegion r, uint32_t i) const;
   Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const;
   Status decodePages(const char id[4], TexelLayout layout, uint8_t* pages) const;
   std::string path_;
@@ -164,6 +172,7 @@ class PackReader {
   const uint8_t* nrml_ = nullptr;
   OwnedPages hOwn_, nOwn_, cOwn_;  // decoded compressed pages
   bool onDemand_ = false;
+  bool tilesIndexed_ = false;  // the compressed sections' tile indexes were checked
 };
 
 // The source files the pack was made from (its NOTE's "source:" lines) and the --columns spec of

@@ -99,7 +99,7 @@ struct Row {
   Config config;
   Summary gpu, cpu;
   double drawn = 0, culled = 0, splats = 0, sliced = 0, frags = 0, submitted = 0;
-  double uploads = 0, evicted = 0, coarsened = 0, missing = 0, residentBytes = 0;  // --gpu-budget, per frame
+  double uploads = 0, evicted = 0, coarsened = 0, missing = 0, residentBytes = 0, heldBytes = 0;  // --gpu-budget, per frame
   bool invocations = false;
   WorkCounters work;  // one counted frame per camera, after the timed ones (atomics cost time)
   RenderMode drawn_mode = RenderMode::kParallax;
@@ -132,6 +132,7 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
     row.coarsened += st.coarsened;
     row.missing += st.missing;
     row.residentBytes += double(st.residentBytes);
+    row.heldBytes += double(st.heldBytes);
     csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f << ","
         << cam << "," << st.gpuMs << "," << st.cpuMs << "," << st.submitted << "," << st.culled << "," << st.drawn << ","
         << st.inside << "," << st.splats << "," << st.points << "," << st.fragments << "\n";
@@ -143,7 +144,7 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
   row.sliced /= n;
   row.frags /= n;
   row.submitted /= n;
-  for (double* v : {&row.uploads, &row.evicted, &row.coarsened, &row.missing, &row.residentBytes}) *v /= n;
+  for (double* v : {&row.uploads, &row.evicted, &row.coarsened, &row.missing, &row.residentBytes, &row.heldBytes}) *v /= n;
   row.gpu = summarize(gpu);
   row.cpu = summarize(cpu);
   row.invocations = fr.stats.fragmentsAreInvocations;
@@ -176,7 +177,8 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
   if (budget)
     json << ", \"budget\": {\"uploads_per_frame\": " << r.uploads << ", \"evicted_per_frame\": " << r.evicted
          << ", \"coarsened_per_frame\": " << r.coarsened << ", \"missing_per_frame\": " << r.missing
-         << ", \"resident_bytes\": " << r.residentBytes << "}";
+         << ", \"resident_bytes\": " << r.residentBytes
+         << ", \"held_bytes\": " << r.heldBytes << "}";
   if (r.work.valid && r.work.rays > 0)  // modes that cast nothing (slices) count nothing
     json << ", \"work\": {\"unit\": \"" << (r.drawn_mode == RenderMode::kParallax ? "samples" : "nodes") << "\", \"rays\": " << r.work.rays
          << ", \"lookups\": " << r.work.lookups << ", \"fallbacks\": " << r.work.fallbacks
@@ -258,7 +260,7 @@ int cmdBench(int argc, char** argv) {
   if (!budget) return reportError(budget.status());
   const bool stream = a.flag("stream") || *budget > 0;
   PackReader pack;
-  s = pack.open(a.positionals()[0], stream ? PageLoad::kOnDemand : PageLoad::kAll);
+  s = pack.open(a.positionals()[0], *budget ? PageLoad::kTiles : stream ? PageLoad::kOnDemand : PageLoad::kAll);
   if (!s) return reportError(s);
   StreamReport streamed;
   streamed.openMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();

@@ -190,7 +190,7 @@ int cmdRender(int argc, char** argv) {
   auto budget = gpuBudgetFromArgs(a);
   if (!budget) return reportError(budget.status());
   PackReader pack;
-  s = pack.open(a.positionals()[0], *budget ? PageLoad::kOnDemand : PageLoad::kAll);
+  s = pack.open(a.positionals()[0], *budget ? PageLoad::kTiles : PageLoad::kAll);
   if (!s) return reportError(s);
   std::vector<Camera> cams;
   s = camerasFromArgs(a, pack, 0, 1024, cams);
@@ -223,8 +223,9 @@ int cmdRender(int argc, char** argv) {
     s = *budget ? renderSettled(renderer, cams[i], rs, fr, readBack, frames) : renderer.render(cams[i], rs, fr, readBack);
     if (!s) return reportError(s);
     if (*budget && !quiet && !json)
-      std::fprintf(stderr, "%s: --gpu-budget: settled after %llu frames, %.1f MiB of tiles resident, %u cells %d level(s) coarser to fit\n",
-                   outputs.images[i].c_str(), (unsigned long long)frames, fr.stats.residentBytes / 1048576.0, fr.stats.coarsened,
+      std::fprintf(stderr, "%s: --gpu-budget: settled after %llu frames, %.1f MiB of tiles resident (%.1f MiB decoded in memory), %u cells %d level(s) coarser to fit\n",
+                   outputs.images[i].c_str(), (unsigned long long)frames, fr.stats.residentBytes / 1048576.0,
+                   fr.stats.heldBytes / 1048576.0, fr.stats.coarsened,
                    fr.stats.budgetBias);
     const std::string& image = outputs.images[i];
     s = writeImage(image, fr.color);

@@ -10,6 +10,7 @@
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstddef>
 #include <cmath>
@@ -137,11 +138,18 @@ struct Renderer::Gl {
   std::vector<uint8_t> resident;
   uint32_t residentCount = 0;
   std::string streamError;
-  // --gpu-budget: the tile cache's residency, each cell's coarser levels (built by the decoder),
-  // which cells are decoded, and the last frame's plan.
+  // --gpu-budget: the tile cache's residency; per cell, its levels in memory (built by the
+  // decoder from the level asked for, wantLevel, down; the finer ones dropped once a level is
+  // uploaded), the finest of them (availFrom), whether it is being decoded, when it was last
+  // visible; the cells holding levels and their bytes; the last frame's plan.
   std::unique_ptr<TileResidency> residency;
-  std::vector<std::vector<TileImage>> mips;
-  std::vector<uint8_t> decoded;
+  std::vector<std::vector<TileImage>> levels;
+  std::vector<uint8_t> availFrom, inFlight;
+  std::vector<std::atomic<uint8_t>> wantLevel;  // read by the decoding threads
+  std::vector<uint64_t> seenAt;
+  uint64_t budgetFrame = 0;
+  std::vector<uint32_t> held;
+  uint64_t heldBytes = 0;
   TileResidency::Frame lastPlan;
   bool budgetSettled = false;
   void releaseTargets() {
@@ -333,9 +341,34 @@ Status Renderer::initBudget(const PackReader& pack, uint64_t budget, int maxLaye
     if (!budgetMode(mi.mode)) modeProblems_[int(mi.mode)] = "--gpu-budget: this mode needs every tile at full resolution";
   g.pack = &pack;
   g.residency = std::make_unique<TileResidency>(pack.cells(), size, uint32_t(layers), texelBytes);
-  g.mips.resize(cellCount_);
-  g.decoded.assign(cellCount_, 0);
-  g.streamer = std::make_unique<TileStreamer>(pack, 0, [&g, &pack](uint32_t i) { g.mips[i] = buildMips(pack, i); });
+  g.levels.resize(cellCount_);
+  g.availFrom.assign(cellCount_, TileResidency::kNoLevel);
+  g.inFlight.assign(cellCount_, 0);
+  g.wantLevel = std::vector<std::atomic<uint8_t>>(cellCount_);
+  g.seenAt.assign(cellCount_, 0);
+  // Only the cells asked for, from the level asked for down: what is held in memory follows the
+  // view, not the pack's size. A tile that fails to decode gets empty levels (the cell never
+  // draws) and the error is reported once.
+  g.streamer = std::make_unique<TileStreamer>(
+      pack, 0,
+      [&g, &pack](uint32_t i) {
+        const uint32_t from = g.wantLevel[i].load();
+        Status s = buildLevels(pack, i, from, g.levels[i]);
+        if (!s) {
+          const CellRecord& c = pack.cells()[i];
+          g.levels[i].clear();
+          for (uint32_t l = 0; l < g.residency->levels(i); ++l) {
+            TileImage t;
+            TileResidency::levelSize(c, l, t.w, t.h);
+            if (l >= from) t.heights.assign(size_t(t.w + 2) * (t.h + 2), 0);
+            if (l >= from && pack.hasNormals()) t.normals.assign(t.heights.size() * kNormalBytes, 0);
+            if (l >= from && pack.hasColor()) t.rgba.assign(t.heights.size() * 4, 0);
+            g.levels[i].push_back(std::move(t));
+          }
+        }
+        return s;
+      },
+      TileStreamer::Order::kOnRequest);
   return Status::ok();
 }
 
@@ -350,22 +383,12 @@ void Renderer::uploadLevel(const TileResidency::Upload& u) {
   const GLint x = GLint(u.block.x), y = GLint(u.block.y), z = GLint(u.block.layer);
   const GLsizei W = GLsizei(w + 2), H = GLsizei(h + 2);
   const GLenum nType = kNormalBytes == 2 ? GL_UNSIGNED_BYTE : GL_UNSIGNED_SHORT;
-  if (u.level == 0) {  // from the pack's pages
-    const uint32_t PW = pack.meta().pageWidth;
-    const uint64_t at = uint64_t(c.tileY - 1) * PW + (c.tileX - 1);
-    glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(PW));
-    glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, pack.heightPage(c.page) + at);
-    if (hasColor_) glTextureSubImage3D(g.pageColorTex, 0, x, y, z, W, H, 1, GL_RGBA, GL_UNSIGNED_BYTE, pack.colorPage(c.page) + 4 * at);
-    if (hasNormals_) glTextureSubImage3D(g.normalTex, 0, x, y, z, W, H, 1, GL_RG, nType, pack.normalPage(c.page) + kNormalBytes * at);
-    glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-  } else {
-    const TileImage& t = g.mips[u.cell][u.level - 1];
-    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);  // rows of an odd number of 2-byte texels
-    glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, t.heights.data());
-    if (hasColor_) glTextureSubImage3D(g.pageColorTex, 0, x, y, z, W, H, 1, GL_RGBA, GL_UNSIGNED_BYTE, t.rgba.data());
-    if (hasNormals_) glTextureSubImage3D(g.normalTex, 0, x, y, z, W, H, 1, GL_RG, nType, t.normals.data());
-    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-  }
+  const TileImage& t = g.levels[u.cell][u.level];
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);  // rows of an odd number of 2-byte texels
+  glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, t.heights.data());
+  if (hasColor_) glTextureSubImage3D(g.pageColorTex, 0, x, y, z, W, H, 1, GL_RGBA, GL_UNSIGNED_BYTE, t.rgba.data());
+  if (hasNormals_) glTextureSubImage3D(g.normalTex, 0, x, y, z, W, H, 1, GL_RG, nType, t.normals.data());
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
   const float size[2] = {float(w), float(h)};
   const int32_t tile[3] = {int32_t(u.block.layer), int32_t(u.block.x + 1), int32_t(u.block.y + 1)};
   const GLintptr base = GLintptr(u.cell) * GLintptr(sizeof(GpuCell));
@@ -373,30 +396,87 @@ void Renderer::uploadLevel(const TileResidency::Upload& u) {
   glNamedBufferSubData(g.cellBuf, base + GLintptr(offsetof(GpuCell, tile)), sizeof tile, tile);
 }
 
+// --gpu-budget: cell c's levels from `from` on kept, the finer ones dropped (from = kNoLevel:
+// all; the streamer may then decode it again).
+void Renderer::dropLevels(uint32_t c, uint32_t from) {
+  Gl& g = *gl_;
+  if (g.availFrom[c] == TileResidency::kNoLevel || from <= g.availFrom[c]) return;
+  const uint64_t before = levelBytes(g.levels[c]);
+  if (from >= g.levels[c].size()) {
+    g.levels[c] = {};
+    g.availFrom[c] = TileResidency::kNoLevel;
+    g.streamer->release(c);
+  } else {
+    for (uint32_t l = g.availFrom[c]; l < from; ++l) g.levels[c][l] = TileImage{g.levels[c][l].w, g.levels[c][l].h, {}, {}, {}};
+    g.availFrom[c] = uint8_t(from);
+  }
+  g.heldBytes -= before - levelBytes(g.levels[c]);
+}
+
+// --gpu-budget: the cells decoded since join those holding levels.
+void Renderer::takeLevels() {
+  Gl& g = *gl_;
+  for (uint32_t i : g.streamer->takeDecoded()) {
+    g.inFlight[i] = 0;
+    uint8_t from = TileResidency::kNoLevel;
+    for (size_t l = 0; l < g.levels[i].size() && from == TileResidency::kNoLevel; ++l)
+      if (!g.levels[i][l].heights.empty()) from = uint8_t(l);
+    if (from == TileResidency::kNoLevel) continue;
+    g.availFrom[i] = from;
+    g.heldBytes += levelBytes(g.levels[i]);
+    g.held.push_back(i);
+  }
+}
+
+// --gpu-budget, after a frame's uploads: memory is kept for the levels on the GPU and the
+// coarser ones only; cells evicted, or neither resident nor visible this frame, let go of theirs.
+void Renderer::trimLevels(const TileResidency::Frame& plan) {
+  Gl& g = *gl_;
+  for (const TileResidency::Upload& u : plan.uploads) dropLevels(u.cell, u.level);
+  for (uint32_t c : plan.dropped) dropLevels(c, TileResidency::kNoLevel);
+  size_t keep = 0;
+  for (uint32_t c : g.held) {
+    if (g.availFrom[c] != TileResidency::kNoLevel && g.residency->level(c) < 0 && g.seenAt[c] != g.budgetFrame)
+      dropLevels(c, TileResidency::kNoLevel);
+    if (g.availFrom[c] != TileResidency::kNoLevel) g.held[keep++] = c;
+  }
+  g.held.resize(keep);
+}
+
 // --gpu-budget, each frame before drawing: the cells decoded since, every visible cell's level
-// planned against the cache, up to 64 MiB of levels uploaded. Returns whether any was.
+// planned against the cache, up to 64 MiB of levels uploaded, the levels the view lacks asked
+// for (what the cell holds dropped, finer ones first in the plan's order). Returns whether any
+// level was uploaded.
 bool Renderer::planBudget(const Camera& cam, const Eigen::Vector3d& camRel, const VisibleSet& vis, FrameStats& st) {
   Gl& g = *gl_;
-  for (uint32_t i : g.streamer ? g.streamer->takeDecoded() : std::vector<uint32_t>{}) g.decoded[i] = 1;
-  if (g.streamer && g.streamer->done()) {
-    streamError();
-    g.streamer.reset();
-  }
+  takeLevels();
+  ++g.budgetFrame;
   std::vector<uint32_t> visible = vis.missing;
   for (const std::vector<DrawItem>* list : {&vis.front, &vis.inside, &vis.splats, &vis.sliced})
     for (const DrawItem& d : *list) visible.push_back(d.cell);
+  for (uint32_t c : visible) g.seenAt[c] = g.budgetFrame;
   const double focalPx = cam.height / (2 * std::tan(cam.fovDeg * M_PI / 360.0));
-  g.lastPlan = g.residency->plan(visible, g.decoded.data(), camRel, focalPx, uint64_t(64) << 20);
+  g.lastPlan = g.residency->plan(visible, g.availFrom.data(), camRel, focalPx, uint64_t(64) << 20);
   for (const TileResidency::Upload& u : g.lastPlan.uploads) uploadLevel(u);
-  std::vector<uint32_t> undecoded;
-  for (uint32_t i : vis.missing)
-    if (!g.decoded[i]) undecoded.push_back(i);
-  if (g.streamer) g.streamer->want(std::move(undecoded));
+  trimLevels(g.lastPlan);
+  // The wish is every need, those already asked for included (the streamer skips what it has
+  // begun); a cell arriving coarser than the view now wants is asked for again.
+  std::vector<uint32_t> ask;
+  for (const TileResidency::Need& n : g.lastPlan.needs) {
+    if (!g.inFlight[n.cell]) {
+      dropLevels(n.cell, TileResidency::kNoLevel);  // a finer level than it holds: decoded again
+      g.wantLevel[n.cell] = uint8_t(n.level);
+      g.inFlight[n.cell] = 1;
+    }
+    ask.push_back(n.cell);
+  }
+  g.streamer->want(std::move(ask));
   st.uploads = uint32_t(g.lastPlan.uploads.size());
   st.evicted = g.lastPlan.evicted;
   st.coarsened = g.lastPlan.coarsened;
   st.budgetBias = g.lastPlan.bias;
   st.residentBytes = g.residency->residentBytes();
+  st.heldBytes = g.heldBytes;
   g.budgetSettled = g.lastPlan.waiting == 0 && g.lastPlan.uploads.empty();
   return !g.lastPlan.uploads.empty();
 }

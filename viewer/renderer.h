@@ -86,10 +86,11 @@ struct FrameStats {
   uint32_t sliced = 0;         // auto mode: boxes drawn as slices
   uint32_t missing = 0;        // streamed packs: visible cells not drawn, their tiles not resident yet
   // --gpu-budget: levels uploaded this frame, cells evicted, visible cells drawn coarser than their
-  // texels ask to fit the budget (by budgetBias levels), bytes of the cache in use.
+  // texels ask to fit the budget (by budgetBias levels), bytes of the cache in use, bytes of
+  // decoded levels held in memory.
   uint32_t uploads = 0, evicted = 0, coarsened = 0;
   int budgetBias = 0;
-  uint64_t residentBytes = 0;
+  uint64_t residentBytes = 0, heldBytes = 0;
   uint64_t points = 0;         // points mode: points drawn
   double cpuMs = 0;            // culling + submission + glFinish, wall clock
   double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)
@@ -124,7 +125,9 @@ class Renderer {
   // gpuBudget (bytes, needs streamPages): the page textures are a cache of that size, each
   // visible cell's tile resident at the level its projected texels ask for (a level-0 texel
   // under a pixel: a coarser level), all visible cells coarser still when they do not fit;
-  // cells not seen for longest are evicted. Draws parallax, slices, auto and points.
+  // cells not seen for longest are evicted. Tiles are decoded as the view asks for them and
+  // memory holds only their levels on the GPU and coarser, so the pack is best opened with
+  // PageLoad::kTiles (no page memory: packs larger than RAM). Draws parallax, slices, auto and points.
   Status init(const PackReader& pack, bool streamPages = false, uint64_t gpuBudget = 0);
   // The modes a --gpu-budget renderer draws as themselves (the others fall back to parallax).
   static bool budgetMode(RenderMode m) {
@@ -177,6 +180,9 @@ class Renderer {
   Status initBudget(const PackReader& pack, uint64_t budget, int maxLayers);
   void uploadLevel(const TileResidency::Upload& u);
   bool planBudget(const Camera& cam, const Eigen::Vector3d& camRel, const VisibleSet& vis, FrameStats& st);
+  void takeLevels();
+  void trimLevels(const TileResidency::Frame& plan);
+  void dropLevels(uint32_t cell, uint32_t from);
   void uploadTiles(uint64_t budgetBytes);
   Status ensureTargets(int width, int height);
   void uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double nearPlane, const RenderSettings& s,

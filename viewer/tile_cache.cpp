@@ -86,25 +86,26 @@ TileImage halve(const TileImage& s) {
 
 }  // namespace
 
-std::vector<TileImage> buildMips(const PackReader& pack, uint32_t cell) {
+Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std::vector<TileImage>& out) {
   const CellRecord& c = pack.cells()[cell];
-  const uint32_t PW = pack.meta().pageWidth;
   const bool nn = pack.hasNormals(), cc = pack.hasColor();
-  TileImage t = blank(c.tileW, c.tileH, nn, cc);
-  for (int j = -1; j <= int(c.tileH); ++j)
-    for (int i = -1; i <= int(c.tileW); ++i) {
-      const uint64_t p = uint64_t(int64_t(c.tileY) + j) * PW + uint64_t(int64_t(c.tileX) + i);
-      const size_t o = at(t, i, j);
-      t.heights[o] = pack.heightPage(c.page)[p];
-      if (nn) std::copy_n(pack.normalPage(c.page) + p * kNormalBytes, kNormalBytes, &t.normals[o * kNormalBytes]);
-      if (cc) std::copy_n(pack.colorPage(c.page) + p * 4, 4, &t.rgba[o * 4]);
-    }
-  std::vector<TileImage> out;
-  while (t.w > 1 || t.h > 1) {
-    t = halve(t);
-    out.push_back(t);
+  out.clear();
+  out.push_back(blank(c.tileW, c.tileH, nn, cc));
+  TileImage& t = out.back();
+  SA_RETURN_IF_ERROR(pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr));
+  while (out.back().w > 1 || out.back().h > 1) out.push_back(halve(out.back()));
+  for (uint32_t k = 0; k < std::min<size_t>(keepFrom, out.size()); ++k) {
+    out[k].heights = {};
+    out[k].normals = {};
+    out[k].rgba = {};
   }
-  return out;
+  return Status::ok();
+}
+
+uint64_t levelBytes(const std::vector<TileImage>& levels) {
+  uint64_t b = 0;
+  for (const TileImage& t : levels) b += t.heights.size() * 2 + t.normals.size() + t.rgba.size();
+  return b;
 }
 
 BlockAllocator::BlockAllocator(uint32_t size, uint32_t layers) : size_(size) {
@@ -225,19 +226,20 @@ void TileResidency::drop(uint32_t cell) {
 }
 
 // A block of w x h, evicting the cells least recently seen (none seen this frame) until it fits.
-bool TileResidency::makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, uint32_t& evicted) {
+bool TileResidency::makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, Frame& f) {
   while (!alloc_.allocate(w, h, out)) {
     int victim = -1;
     for (uint32_t c : resident_)
       if (lastSeen_[c] < frame_ && (victim < 0 || lastSeen_[c] < lastSeen_[uint32_t(victim)])) victim = int(c);
     if (victim < 0) return false;
     drop(uint32_t(victim));
-    ++evicted;
+    f.dropped.push_back(uint32_t(victim));
+    ++f.evicted;
   }
   return true;
 }
 
-TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, const uint8_t* decoded,
+TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, const uint8_t* availFrom,
                                          const Eigen::Vector3d& eyeRel, double focalPx, uint64_t maxUploadBytes) {
   ++frame_;
   Frame out;
@@ -270,17 +272,22 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
     const uint32_t lv = level(w);
     if (lv > w.level) ++out.coarsened;
     if (level_[w.cell] == int(lv)) continue;
-    if (!decoded[w.cell] || bytes >= maxUploadBytes) {
+    if (availFrom[w.cell] > lv) {
+      out.needs.push_back({w.cell, lv});
+      ++out.waiting;
+      continue;
+    }
+    if (bytes >= maxUploadBytes) {
       ++out.waiting;
       continue;
     }
     uint32_t lw, lh;
     levelSize(cells_[w.cell], lv, lw, lh);
     BlockAllocator::Block b;
-    bool ok = makeRoom(lw + 2, lh + 2, b, out.evicted);
+    bool ok = makeRoom(lw + 2, lh + 2, b, out);
     if (!ok && level_[w.cell] >= 0 && int(lv) > level_[w.cell]) {  // going coarser: its own block makes room
       drop(w.cell);
-      ok = makeRoom(lw + 2, lh + 2, b, out.evicted);
+      ok = makeRoom(lw + 2, lh + 2, b, out);
     }
     if (!ok) {
       ++out.waiting;

@@ -25,10 +25,15 @@ struct TileImage {
   std::vector<uint8_t> rgba;     // empty when the pack has no colour
 };
 
-// Levels 1, 2, ... of cell i's tile (level 0 is the pack's), down to one texel on the longer
-// side: a coarse texel is covered where at least half the texels under it are (so coverage
-// edges stay where they were), its height the mean of the covered ones, normals the normalized mean, colours the mean. Needs cell i's tile decoded.
-std::vector<TileImage> buildMips(const PackReader& pack, uint32_t i);
+// Levels 0, 1, 2, ... of cell i's tile, down to one texel on the longer side, level 0 decoded
+// from the pack (PackReader::decodeCellInto: any PageLoad but kNone) and each coarser one halving
+// it: a coarse texel is covered where at least half the texels under it are (so coverage edges
+// stay where they were), its height the mean of the covered ones, normals the normalized mean,
+// colours the mean. Levels under keepFrom are left empty (their size set, no texels): what is
+// not needed is not kept.
+Status buildLevels(const PackReader& pack, uint32_t i, uint32_t keepFrom, std::vector<TileImage>& out);
+// The bytes of texels a cell's levels hold.
+uint64_t levelBytes(const std::vector<TileImage>& levels);
 
 // A buddy allocator of power-of-two rectangles over `layers` square layers of `size` texels.
 class BlockAllocator {
@@ -67,16 +72,23 @@ class TileResidency {
     uint32_t cell = 0, level = 0;
     BlockAllocator::Block block;
   };
+  struct Need {
+    uint32_t cell = 0, level = 0;
+  };
   struct Frame {
     std::vector<Upload> uploads;   // in priority order, blocks allocated (old ones released)
+    std::vector<Need> needs;       // visible cells whose wanted level is not in memory, in priority order
+    std::vector<uint32_t> dropped; // cells that lost their block to make room
     uint32_t evicted = 0;          // cells that lost their block to make room
     uint32_t coarsened = 0;        // visible cells wanted coarser than their texels ask, to fit the budget
     uint32_t waiting = 0;          // visible cells not at their wanted level after this frame's uploads
     int bias = 0;                  // levels every visible cell went coarser to fit
   };
-  // visible: the cells the frame draws or lacks; decoded[cell]: its tile and mips are in memory.
+  // visible: the cells the frame draws or lacks; availFrom[cell]: the finest of its levels in
+  // memory (every coarser one is too), kNoLevel when none.
   // eyeRel: the camera relative to the pack origin; focalPx: pixels per unit of depth.
-  Frame plan(std::span<const uint32_t> visible, const uint8_t* decoded, const Eigen::Vector3d& eyeRel, double focalPx,
+  static constexpr uint8_t kNoLevel = 255;
+  Frame plan(std::span<const uint32_t> visible, const uint8_t* availFrom, const Eigen::Vector3d& eyeRel, double focalPx,
              uint64_t maxUploadBytes);
   int level(uint32_t cell) const { return level_[cell]; }   // -1: not resident
   uint32_t levels(uint32_t cell) const;                     // levels the cell has (1 + its mips)
@@ -88,7 +100,7 @@ class TileResidency {
 
  private:
   uint64_t blockTexels(uint32_t cell, uint32_t level) const;
-  bool makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, uint32_t& evicted);
+  bool makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, Frame& f);
   void drop(uint32_t cell);
   std::span<const CellRecord> cells_;
   std::vector<Eigen::Vector3d> center_;

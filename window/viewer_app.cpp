@@ -510,7 +510,8 @@ void drawPanel(AppState& s, GLFWwindow* win) {
 // the window opens) and the measurements file. An error names the file; nothing is opened.
 Status loadViewerInputs(AppState& s, const std::string& packPath, const ViewerOptions& opt, std::vector<ScriptCommand>& script) {
   s.packPath = packPath;
-  Status st = s.pack.open(packPath, PageLoad::kOnDemand);  // tiles decoded as the window needs them
+  // Tiles decoded as the window needs them; under --gpu-budget into the cache only (no page memory).
+  Status st = s.pack.open(packPath, opt.gpuBudget ? PageLoad::kTiles : PageLoad::kOnDemand);
   if (!st) return Status::badInput(st.message() + "\n(run 'scanatlas info' on it, or repack)");
   std::vector<std::string> inputs = packSources(s.pack);  // the points mode reads them
   inputs.insert(inputs.end(), {packPath, opt.scriptPath, opt.groovesPath});

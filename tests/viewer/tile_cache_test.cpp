@@ -63,16 +63,24 @@ TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
   ASSERT_TRUE(p.open(packSphere(d)).isOk());
   for (uint32_t i = 0; i < p.cells().size(); ++i) {
     const CellRecord& c = p.cells()[i];
-    const std::vector<TileImage> m = buildMips(p, i);
-    ASSERT_FALSE(m.empty());
-    EXPECT_EQ(std::max(m.back().w, m.back().h), 1u);
+    std::vector<TileImage> all, m;
+    ASSERT_TRUE(buildLevels(p, i, 0, all).isOk());
+    ASSERT_GE(all.size(), 2u);
+    // Level 0 is the pack's tile with its gutter.
+    ASSERT_EQ(all[0].heights.size(), size_t(c.tileW + 2) * (c.tileH + 2));
+    for (int j = -1; j <= int(c.tileH); ++j)
+      for (int k = -1; k <= int(c.tileW); ++k)
+        ASSERT_EQ(all[0].heights[size_t(j + 1) * (c.tileW + 2) + size_t(k + 1)], p.texel(c, k, j));
+    // Kept from level 2: the finer ones sized but empty, the rest the same texels.
+    ASSERT_TRUE(buildLevels(p, i, 2, m).isOk());
+    ASSERT_EQ(m.size(), all.size());
     for (uint32_t k = 0; k < m.size(); ++k) {
-      uint32_t w, h;
-      TileResidency::levelSize(c, k + 1, w, h);
-      EXPECT_EQ(m[k].w, w);
-      EXPECT_EQ(m[k].h, h);
-      EXPECT_EQ(m[k].heights.size(), size_t(w + 2) * (h + 2));
+      EXPECT_EQ(m[k].w, all[k].w);
+      EXPECT_EQ(m[k].heights.empty(), k < 2 && all.size() > k);
+      if (k >= 2) EXPECT_EQ(m[k].heights, all[k].heights);
     }
+    EXPECT_LT(levelBytes(m), levelBytes(all));
+    m.assign(all.begin() + 1, all.end());
     // Level 1 texel (0, 0): covered where half of level 0's first 2 x 2 are, their mean.
     double sum = 0;
     int n = 0, under = 0;
@@ -94,7 +102,7 @@ TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
   const uint32_t n = uint32_t(p.cells().size());
   std::vector<uint32_t> all(n);
   for (uint32_t i = 0; i < n; ++i) all[i] = i;
-  std::vector<uint8_t> decoded(n, 1);
+  std::vector<uint8_t> decoded(n, 0);  // every level in memory
   const Eigen::Vector3d eye(0, 0, 4);  // relative to the pack origin, which is near the centre
   // Near, with room for everything: every cell at level 0.
   TileResidency big(p.cells(), 512, 64, 10);
@@ -109,15 +117,18 @@ TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
   EXPECT_LT(big.residentBytes(), nearBytes);
   // A cache too small for level 0: all coarser, within its capacity; not decoded: waiting.
   TileResidency small(p.cells(), 256, 1, 10);
-  decoded[0] = 0;
+  decoded[0] = TileResidency::kNoLevel;
   f = small.plan(all, decoded.data(), eye - Eigen::Vector3d(p.meta().origin), 1e6, UINT64_MAX);
   EXPECT_GT(f.bias, 0);
   EXPECT_GT(f.coarsened, 0u);
   EXPECT_EQ(f.waiting, 1u);
+  ASSERT_EQ(f.needs.size(), 1u);
+  EXPECT_EQ(f.needs[0].cell, 0u);
+  EXPECT_GT(f.needs[0].level, 0u) << "asked for at the level it will be drawn at";
   EXPECT_EQ(small.level(0), -1);
   EXPECT_LE(small.residentBytes(), small.capacityBytes());
   // Cells no longer seen make room for the ones now seen.
-  decoded[0] = 1;
+  decoded[0] = 0;
   uint32_t x = 0;  // the cell with the largest tile gets a layer of its own block's size
   for (uint32_t i = 0; i < n; ++i)
     if (p.cells()[i].tileW * p.cells()[i].tileH > p.cells()[x].tileW * p.cells()[x].tileH) x = i;
@@ -138,6 +149,7 @@ TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
     EXPECT_EQ(tiny.level(k % n), 0) << k;
     EXPECT_LE(tiny.residentBytes(), tiny.capacityBytes());
     evicted += f.evicted;
+    EXPECT_EQ(f.dropped.size(), f.evicted);
   }
   std::printf("%u cells, level-0 blocks %.2fx the cache: %u evictions\n", n, double(blocks) / tiny.capacityBytes(), evicted);
   if (blocks > tiny.capacityBytes()) EXPECT_GT(evicted, 0u);
