@@ -94,11 +94,8 @@ Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std
   TileImage& t = out.back();
   SA_RETURN_IF_ERROR(pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr));
   while (out.back().w > 1 || out.back().h > 1) out.push_back(halve(out.back()));
-  for (uint32_t k = 0; k < std::min<size_t>(keepFrom, out.size()); ++k) {
-    out[k].heights = {};
-    out[k].normals = {};
-    out[k].rgba = {};
-  }
+  for (uint32_t k = 0; k < std::min<size_t>(keepFrom, out.size()); ++k)
+    out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
   return Status::ok();
 }
 
