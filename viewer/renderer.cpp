@@ -169,7 +169,7 @@ struct Renderer::Gl {
   GLint ssboAlign = 256;  // GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT
   int fbW = 0, fbH = 0;
   ~Gl() {
-    streamer.reset();  // its threads write mips and read the pack: join them before anything goes
+    streamer.reset();  // its threads write levels and read the pack: join them before anything goes
     for (GLuint p : {splat, points, edl, boxes, grooveFlatFront, grooveFlatInside})
       if (p) glDeleteProgram(p);
     for (int m = 0; m < kRenderModes; ++m)
@@ -347,27 +347,11 @@ Status Renderer::initBudget(const PackReader& pack, uint64_t budget, int maxLaye
   g.wantLevel = std::vector<std::atomic<uint8_t>>(cellCount_);
   g.seenAt.assign(cellCount_, 0);
   // Only the cells asked for, from the level asked for down: what is held in memory follows the
-  // view, not the pack's size. A tile that fails to decode gets empty levels (the cell never
+  // view, not the pack's size. A tile that fails to decode gets uncovered levels (the cell never
   // draws) and the error is reported once.
   g.streamer = std::make_unique<TileStreamer>(
       pack, 0,
-      [&g, &pack](uint32_t i) {
-        const uint32_t from = g.wantLevel[i].load();
-        Status s = buildLevels(pack, i, from, g.levels[i]);
-        if (!s) {
-          const CellRecord& c = pack.cells()[i];
-          g.levels[i].clear();
-          for (uint32_t l = 0; l < g.residency->levels(i); ++l) {
-            TileImage t;
-            TileResidency::levelSize(c, l, t.w, t.h);
-            if (l >= from) t.heights.assign(size_t(t.w + 2) * (t.h + 2), 0);
-            if (l >= from && pack.hasNormals()) t.normals.assign(t.heights.size() * kNormalBytes, 0);
-            if (l >= from && pack.hasColor()) t.rgba.assign(t.heights.size() * 4, 0);
-            g.levels[i].push_back(std::move(t));
-          }
-        }
-        return s;
-      },
+      [&g, &pack](uint32_t i) { return buildLevels(pack, i, g.wantLevel[i].load(), g.levels[i]); },
       TileStreamer::Order::kOnRequest);
   return Status::ok();
 }

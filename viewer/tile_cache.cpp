@@ -92,11 +92,12 @@ Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std
   out.clear();
   out.push_back(blank(c.tileW, c.tileH, nn, cc));
   TileImage& t = out.back();
-  SA_RETURN_IF_ERROR(pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr));
+  const Status s = pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr);
+  if (!s) t = blank(c.tileW, c.tileH, nn, cc);  // a damaged tile: every level uncovered
   while (out.back().w > 1 || out.back().h > 1) out.push_back(halve(out.back()));
   for (uint32_t k = 0; k < std::min<size_t>(keepFrom, out.size()); ++k)
     out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
-  return Status::ok();
+  return s;
 }
 
 uint64_t levelBytes(const std::vector<TileImage>& levels) {

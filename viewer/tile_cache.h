@@ -30,7 +30,8 @@ struct TileImage {
 // it: a coarse texel is covered where at least half the texels under it are (so coverage edges
 // stay where they were), its height the mean of the covered ones, normals the normalized mean,
 // colours the mean. Levels under keepFrom are left empty (their size set, no texels): what is
-// not needed is not kept.
+// not needed is not kept. A tile that fails to decode gets its levels all uncovered (the cell
+// never draws) and the error is returned.
 Status buildLevels(const PackReader& pack, uint32_t i, uint32_t keepFrom, std::vector<TileImage>& out);
 // The bytes of texels a cell's levels hold.
 uint64_t levelBytes(const std::vector<TileImage>& levels);
