@@ -12,6 +12,7 @@
 #include "cli/view_setup.h"
 #include "common/fileio.h"
 #include "viewer/egl_context.h"
+#include "viewer/eval.h"
 #include "viewer/renderer.h"
 #include "viewer/source_points.h"
 
@@ -59,6 +60,10 @@ const char* kHelp =
     "%s"
     "                         (bench: per configuration the uploads, evictions, cells drawn coarser\n"
     "                         and bytes resident per frame; the timed frames stream as they would)\n"
+    "  --budget-error         with --gpu-budget: after the timed frames, each camera's view once it\n"
+    "                         has settled (no tile pending) against the same view with every tile\n"
+    "                         resident (a second renderer: needs the whole atlas in GPU memory and\n"
+    "                         RAM): coverage IoU and depth error in texels, per view and overall\n"
     "  --csv FILE             one row per frame\n"
     "  --json                 the summary as JSON on stdout\n"
     "  -q, --quiet            no table\n";
@@ -240,13 +245,61 @@ std::string streamJson(const StreamReport& s, uint32_t cells) {
   return b;
 }
 
+// --budget-error: every camera's settled budget view against the same view with every tile
+// resident, in the first configuration's settings.
+struct BudgetError {
+  double iouMean = 0, iouMin = 1, depthMedianMax = 0, depthP95Max = 0;
+  uint64_t settleFrames = 0;  // most frames a view took to settle
+  size_t views = 0;
+};
+
+Status measureBudgetError(Renderer& budgeted, const std::string& packPath, const std::vector<Camera>& cams,
+                          RenderSettings rs, bool print, BudgetError& out) {
+  rs.mode = budgeted.drawnMode(rs.mode);  // what the budget draws (exact and the others fall back to parallax)
+  PackReader whole;
+  SA_RETURN_IF_ERROR(whole.open(packPath));
+  Renderer full;
+  SA_RETURN_IF_ERROR(full.init(whole));
+  const double texel = whole.meta().texelSize;
+  FrameResult a, b;
+  for (size_t v = 0; v < cams.size(); ++v) {
+    uint64_t frames = 1;
+    SA_RETURN_IF_ERROR(budgeted.render(cams[v], rs, b, 0u));
+    for (; budgeted.tilesPending() && frames < 100000; ++frames) SA_RETURN_IF_ERROR(budgeted.render(cams[v], rs, b, 0u));
+    if (budgeted.tilesPending()) return Status::internal("bench --budget-error: view " + std::to_string(v) + " did not settle");
+    SA_RETURN_IF_ERROR(budgeted.render(cams[v], rs, b, kReadDepth));
+    SA_RETURN_IF_ERROR(full.render(cams[v], rs, a, kReadDepth));
+    const RenderAgreement g = compareRenders(a.depth, b.depth, texel);
+    if (print)
+      std::fprintf(stderr, "bench: budget error, view %zu: IoU %.4f (%zu pixels only resident, %zu only budget), depth error median %.3f, p95 %.3f texels; settled in %llu frames, %u cells coarser to fit\n",
+                   v, g.iou, g.onlyA, g.onlyB, g.depthMedian, g.depthP95, (unsigned long long)frames, b.stats.coarsened);
+    out.iouMean += g.iou;
+    out.iouMin = std::min(out.iouMin, g.iou);
+    out.depthMedianMax = std::max(out.depthMedianMax, g.depthMedian);
+    out.depthP95Max = std::max(out.depthP95Max, g.depthP95);
+    out.settleFrames = std::max(out.settleFrames, frames);
+    ++out.views;
+  }
+  out.iouMean /= double(std::max<size_t>(out.views, 1));
+  return Status::ok();
+}
+
+std::string budgetErrorJson(const BudgetError& e) {
+  char b[256];
+  std::snprintf(b, sizeof b,
+                "{\"views\": %zu, \"iou_mean\": %.6f, \"iou_min\": %.6f, \"depth_median_texels_max\": %.4f, "
+                "\"depth_p95_texels_max\": %.4f, \"settle_frames_max\": %llu}",
+                e.views, e.iouMean, e.iouMin, e.depthMedianMax, e.depthP95Max, (unsigned long long)e.settleFrames);
+  return b;
+}
+
 }  // namespace
 
 int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "csv", "gpu-budget"},
-                     {"compare-skips", "stream", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
+                     {"compare-skips", "stream", "budget-error", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -273,6 +326,8 @@ int cmdBench(int argc, char** argv) {
   std::vector<Camera> cams;
   s = camerasFromArgs(a, pack, 60, 1024, cams);
   if (!s) return reportError(s);
+  if (a.flag("budget-error") && !*budget)
+    return reportError(Status::badInput("bench: --budget-error compares a --gpu-budget render with the unlimited one: give --gpu-budget"));
   auto warmup = parseInt("warmup", a.get("warmup", "10"), 0, 100000);
   auto frames = parseInt("frames", a.get("frames", "200"), 1, 1000000);
   if (!warmup) return reportError(warmup.status());
@@ -380,7 +435,17 @@ int cmdBench(int argc, char** argv) {
   }
   progress.finish();
   if (!quiet) printTable(rows, ctx.renderer());
-  json << "]}\n";
+  json << "]";
+  if (a.flag("budget-error")) {
+    BudgetError be;
+    s = measureBudgetError(renderer, a.positionals()[0], cams, configs[0].settings, !quiet, be);
+    if (!s) return reportError(s);
+    if (!quiet)
+      std::fprintf(stderr, "bench: budget error over %zu views: IoU mean %.4f, min %.4f; depth error median at most %.3f texels (p95 at most %.3f)\n",
+                   be.views, be.iouMean, be.iouMin, be.depthMedianMax, be.depthP95Max);
+    json << ", \"budget_error\": " << budgetErrorJson(be);
+  }
+  json << "}\n";
   if (a.has("csv")) {
     const std::string text = csv.str();
     s = writeFileAtomic(a.get("csv"), text.data(), text.size());

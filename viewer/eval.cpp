@@ -12,6 +12,25 @@ double percentile(std::vector<double> v, double q) {
   return v[k];
 }
 
+RenderAgreement compareRenders(const std::vector<float>& a, const std::vector<float>& b, double unit) {
+  RenderAgreement r;
+  std::vector<double> err;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) {
+    const bool ha = std::isfinite(a[i]), hb = std::isfinite(b[i]);
+    r.onlyA += ha && !hb;
+    r.onlyB += hb && !ha;
+    if (ha && hb) {
+      ++r.both;
+      err.push_back(std::abs(double(a[i]) - double(b[i])) / unit);
+    }
+  }
+  const size_t either = r.both + r.onlyA + r.onlyB;
+  r.iou = either ? double(r.both) / double(either) : 1.0;
+  r.depthMedian = percentile(err, 0.5);
+  r.depthP95 = percentile(err, 0.95);
+  return r;
+}
+
 ViewMetrics evaluateView(const Image& tc, const std::vector<float>& td, const std::vector<float>& tn,
                          const ReferenceView& ref, const Image& rs, double diag) {
   ViewMetrics m;

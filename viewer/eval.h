@@ -29,6 +29,14 @@ ViewMetrics evaluateView(const Image& testColor, const std::vector<float>& testD
 
 double percentile(std::vector<double> v, double q);
 
+// Two renders of one view by the same pack (e.g. under --gpu-budget against everything
+// resident): coverage IoU and the depth difference over pixels both cover, in `unit`s (texels).
+struct RenderAgreement {
+  double iou = 1, depthMedian = 0, depthP95 = 0;
+  size_t both = 0, onlyA = 0, onlyB = 0;
+};
+RenderAgreement compareRenders(const std::vector<float>& depthA, const std::vector<float>& depthB, double unit);
+
 // Shading continuity across cell borders: the mean angle between the shading normals of
 // neighbouring pixels (right and down) drawn by different cells, against the same for
 // neighbouring pixels of one cell. Only pairs on one continuous surface count: both hit, depths

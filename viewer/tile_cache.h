@@ -26,13 +26,17 @@ struct TileImage {
 };
 
 // Levels 0, 1, 2, ... of cell i's tile, down to one texel on the longer side, level 0 decoded
-// from the pack (PackReader::decodeCellInto: any PageLoad but kNone) and each coarser one halving
-// it: a coarse texel is covered where at least half the texels under it are (so coverage edges
-// stay where they were), its height the mean of the covered ones, normals the normalized mean,
-// colours the mean. Levels under keepFrom are left empty (their size set, no texels): what is
-// not needed is not kept. A tile that fails to decode gets its levels all uncovered (the cell
-// never draws) and the error is returned.
+// from the pack (PackReader::decodeCellInto: any PageLoad but kNone) and each coarser one by
+// coarserLevel. Levels under keepFrom are left empty (their size set, no texels): what is not
+// needed is not kept. A tile that fails to decode gets its levels all uncovered (the cell never
+// draws) and the error is returned.
 Status buildLevels(const PackReader& pack, uint32_t i, uint32_t keepFrom, std::vector<TileImage>& out);
+// The next level of t: ceil(w / 2) x ceil(h / 2) texels over the same box (the shader spreads a
+// level's texels evenly over the cell's box), each the area average of the texels under its
+// footprint, which is 2 w / (w + 1) texels wide where w is odd. Covered where at least half the
+// footprint is (coverage edges stay where they were); height and colour the covered texels'
+// weighted mean, the normal their normalized weighted mean.
+TileImage coarserLevel(const TileImage& t);
 // The bytes of texels a cell's levels hold.
 uint64_t levelBytes(const std::vector<TileImage>& levels);
 

@@ -391,11 +391,17 @@ TEST(Cli, ConvertInfoAndMixedPackOnRealFiles) {
   EXPECT_TRUE(std::filesystem::exists(d.file("g.png")));
   EXPECT_EQ(run("render " + d.file("mix.hfa") + " --gpu-budget 1M -o " + d.file("h.png")).code, 2);
   EXPECT_FALSE(std::filesystem::exists(d.file("h.png")));
-  CmdResult gb = run("bench " + d.file("mix.hfa") + " --gpu-budget 16M --orbit 2 --size 64x64 --warmup 0 --frames 2 --json");
+  CmdResult gb = run("bench " + d.file("mix.hfa") + " --gpu-budget 16M --orbit 2 --size 64x64 --warmup 0 --frames 2 --json --budget-error");
   ASSERT_EQ(gb.code, 0) << gb.out;
   auto gj = nlohmann::json::parse(gb.out);
   EXPECT_EQ(gj["gpu_budget"].get<uint64_t>(), uint64_t(16) << 20);
   EXPECT_LE(gj["configs"][0]["budget"]["resident_bytes"].get<double>(), double(uint64_t(16) << 20));
+  // --budget-error: each settled view against the unlimited render (the pack fits: nearly the same).
+  EXPECT_EQ(gj["budget_error"]["views"].get<int>(), 2);
+  EXPECT_GT(gj["budget_error"]["iou_min"].get<double>(), 0.8);
+  EXPECT_LE(gj["budget_error"]["iou_min"].get<double>(), gj["budget_error"]["iou_mean"].get<double>());
+  EXPECT_LE(gj["budget_error"]["depth_median_texels_max"].get<double>(), 1.0);
+  EXPECT_EQ(run("bench " + d.file("mix.hfa") + " --budget-error --orbit 1 --frames 1").code, 2) << "needs --gpu-budget";
 
   // Failures: exit 2 with no output file and no temporary left behind.
   EXPECT_EQ(run("convert " + las + " -o " + d.file("x.las")).code, 2);  // no LAS writer
