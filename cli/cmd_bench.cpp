@@ -309,11 +309,11 @@ int cmdBench(int argc, char** argv) {
   if (!s) return reportError(s);
   if (a.positionals().size() != 1) return reportError(Status::badInput("bench: give exactly one pack (see --help)"));
   const auto t0 = std::chrono::steady_clock::now();
-  auto budget = gpuBudgetFromArgs(a);
-  if (!budget) return reportError(budget.status());
-  const bool stream = a.flag("stream") || *budget > 0;
+  auto budgetArg = gpuBudgetFor(a, a.positionals()[0]);
+  if (!budgetArg) return reportError(budgetArg.status());
+  GpuBudget budget = *budgetArg;
   PackReader pack;
-  s = pack.open(a.positionals()[0], *budget ? PageLoad::kTiles : stream ? PageLoad::kOnDemand : PageLoad::kAll);
+  s = pack.open(a.positionals()[0], budget.bytes ? PageLoad::kTiles : a.flag("stream") ? PageLoad::kOnDemand : PageLoad::kAll);
   if (!s) return reportError(s);
   StreamReport streamed;
   streamed.openMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -326,8 +326,6 @@ int cmdBench(int argc, char** argv) {
   std::vector<Camera> cams;
   s = camerasFromArgs(a, pack, 60, 1024, cams);
   if (!s) return reportError(s);
-  if (a.flag("budget-error") && !*budget)
-    return reportError(Status::badInput("bench: --budget-error compares a --gpu-budget render with the unlimited one: give --gpu-budget"));
   auto warmup = parseInt("warmup", a.get("warmup", "10"), 0, 100000);
   auto frames = parseInt("frames", a.get("frames", "200"), 1, 1000000);
   if (!warmup) return reportError(warmup.status());
@@ -388,10 +386,14 @@ int cmdBench(int argc, char** argv) {
   EglContext ctx;
   s = ctx.init();
   if (!s) return reportError(s);
-  Renderer renderer;
-  s = renderer.init(pack, stream, *budget);
-  if (!s) return reportError(s);
   const bool quiet = a.flag("quiet") || a.flag("json");
+  boundByGpuMemory(budget, "bench", a.flag("quiet"));
+  if (a.flag("budget-error") && !budget.bytes)
+    return reportError(Status::badInput("bench: --budget-error compares a --gpu-budget render with the unlimited one: give --gpu-budget"));
+  const bool stream = a.flag("stream") || budget.bytes > 0;
+  Renderer renderer;
+  s = renderer.init(pack, stream, budget.bytes);
+  if (!s) return reportError(s);
   streamed.initMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   if (a.flag("stream")) {
     s = streamFirstView(renderer, cams[0], configs[0].settings, t0, streamed);
@@ -416,7 +418,7 @@ int cmdBench(int argc, char** argv) {
   json << "{\"pack\": \"" << jsonEscape(pack.path()) << "\", \"renderer\": \"" << jsonEscape(ctx.renderer())
        << "\", \"width\": " << cams[0].width << ", \"height\": " << cams[0].height << ", \"frames\": " << *frames
        << ", \"warmup\": " << *warmup << ", \"cameras\": " << cams.size();
-  if (*budget) json << ", \"gpu_budget\": " << *budget;
+  if (budget.bytes) json << ", \"gpu_budget\": " << budget.bytes << ", \"gpu_budget_default\": " << (budget.automatic ? "true" : "false");
   if (a.flag("stream")) json << ", \"stream\": " << streamJson(streamed, pack.meta().cellCount);
   json << ", \"configs\": [";
   // Frames of every configuration, on a terminal as a bar with the time left.
@@ -431,7 +433,7 @@ int cmdBench(int argc, char** argv) {
     });
     if (!s) return reportError(s);
     rows.push_back(row);
-    json << (ci ? ", " : "") << rowJson(row, renderer, pack, *budget > 0);
+    json << (ci ? ", " : "") << rowJson(row, renderer, pack, budget.bytes > 0);
   }
   progress.finish();
   if (!quiet) printTable(rows, ctx.renderer());

@@ -187,10 +187,11 @@ int cmdRender(int argc, char** argv) {
   if (!s) return reportError(s);
   if (a.positionals().size() != 1) return reportError(Status::badInput("render: give exactly one pack (see --help)"));
   if (!a.has("output")) return reportError(Status::badInput("render: -o OUT.png is required"));
-  auto budget = gpuBudgetFromArgs(a);
-  if (!budget) return reportError(budget.status());
+  auto budgetArg = gpuBudgetFor(a, a.positionals()[0]);
+  if (!budgetArg) return reportError(budgetArg.status());
+  GpuBudget budget = *budgetArg;
   PackReader pack;
-  s = pack.open(a.positionals()[0], *budget ? PageLoad::kTiles : PageLoad::kAll);
+  s = pack.open(a.positionals()[0], budget.bytes ? PageLoad::kTiles : PageLoad::kAll);
   if (!s) return reportError(s);
   std::vector<Camera> cams;
   s = camerasFromArgs(a, pack, 0, 1024, cams);
@@ -209,10 +210,11 @@ int cmdRender(int argc, char** argv) {
   EglContext ctx;
   s = ctx.init();
   if (!s) return reportError(s);
-  Renderer renderer;
-  s = renderer.init(pack, *budget > 0, *budget);
-  if (!s) return reportError(s);
   const bool quiet = a.flag("quiet"), json = a.flag("json");
+  boundByGpuMemory(budget, "render", quiet);
+  Renderer renderer;
+  s = renderer.init(pack, budget.bytes > 0, budget.bytes);
+  if (!s) return reportError(s);
   if (!quiet) warnIfModeFallsBack(renderer, pack, rs.mode);
   std::vector<double> times;
   if (json) std::printf("{\"renderer\": \"%s\", \"views\": [", jsonEscape(ctx.renderer()).c_str());
@@ -220,9 +222,9 @@ int cmdRender(int argc, char** argv) {
     FrameResult fr;
     uint64_t frames = 1;
     const unsigned readBack = kReadColor | (a.has("depth-out") ? kReadDepth : 0u);
-    s = *budget ? renderSettled(renderer, cams[i], rs, fr, readBack, frames) : renderer.render(cams[i], rs, fr, readBack);
+    s = budget.bytes ? renderSettled(renderer, cams[i], rs, fr, readBack, frames) : renderer.render(cams[i], rs, fr, readBack);
     if (!s) return reportError(s);
-    if (*budget && !quiet && !json)
+    if (budget.bytes && !quiet && !json)
       std::fprintf(stderr, "%s: --gpu-budget: settled after %llu frames, %.1f MiB of tiles resident (%.1f MiB decoded in memory), %u cells %d level(s) coarser to fit\n",
                    outputs.images[i].c_str(), (unsigned long long)frames, fr.stats.residentBytes / 1048576.0,
                    fr.stats.heldBytes / 1048576.0, fr.stats.coarsened,

@@ -70,9 +70,6 @@ int cmdView(int argc, char** argv) {
   opt.groovesPath = a.get("grooves");
   opt.vsync = !a.flag("no-vsync");
   opt.quiet = a.flag("quiet");
-  auto budget = gpuBudgetFromArgs(a);
-  if (!budget) return reportError(budget.status());
-  opt.gpuBudget = *budget;
   if (a.has("size")) {
     s = parseWxH("size", a.get("size"), opt.width, opt.height);
     if (!s) return reportError(s);
@@ -83,6 +80,9 @@ int cmdView(int argc, char** argv) {
     if (!cache) return reportError(cache.status());
     path = *cache;
   }
+  auto budget = gpuBudgetFor(a, path);
+  if (!budget) return reportError(budget.status());
+  opt.gpuBudget = *budget;
   return runViewer(path, opt);
 }
 

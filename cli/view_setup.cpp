@@ -1,6 +1,7 @@
 #include <cstdio>
 #include "cli/view_setup.h"
 
+#include <cstdlib>
 #include <sstream>
 
 #include "viewer/camera_path.h"
@@ -141,12 +142,28 @@ Status slicesFromArgs(const Args& a, RenderSettings& rs) {
   return Status::ok();
 }
 
-Result<uint64_t> gpuBudgetFromArgs(const Args& a) {
-  if (!a.has("gpu-budget")) return uint64_t(0);
-  auto v = parseSize("gpu-budget", a.get("gpu-budget"));
-  if (!v) return v.status();
-  if (*v < (uint64_t(16) << 20)) return Status::badInput("--gpu-budget: at least 16M is needed");
-  return *v;
+Result<GpuBudget> gpuBudgetFor(const Args& a, const std::string& packPath) {
+  GpuBudget b;
+  if (a.has("gpu-budget")) {
+    if (a.get("gpu-budget") == "off") return b;
+    auto v = parseSize("gpu-budget", a.get("gpu-budget"));
+    if (!v) return v.status();
+    if (*v < (uint64_t(16) << 20)) return Status::badInput("--gpu-budget: at least 16M is needed (or off)");
+    b.bytes = *v;
+    return b;
+  }
+  b.automatic = true;
+  b.ram = physicalMemoryBytes();
+  if (const char* e = std::getenv("SCANATLAS_MEMORY")) {
+    auto v = parseSize("SCANATLAS_MEMORY", e);
+    if (!v) return v.status();
+    b.ram = *v;
+  }
+  PackReader meta;
+  SA_RETURN_IF_ERROR(meta.open(packPath, PageLoad::kNone));
+  b.atlas = atlasBytes(meta);
+  b.bytes = defaultGpuBudget(b.atlas, b.ram, 0);
+  return b;
 }
 
 Status renderSettled(Renderer& r, const Camera& cam, const RenderSettings& rs, FrameResult& out, unsigned readBack,

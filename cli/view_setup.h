@@ -8,6 +8,7 @@
 #include "cli/args.h"
 #include "viewer/camera.h"
 #include "viewer/renderer.h"
+#include "viewer/tile_cache.h"
 
 namespace sa {
 
@@ -25,14 +26,21 @@ void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi
 // Says on stderr when the pack lacks what mode m needs (and what draws instead, and how to bake it).
 void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m);
 
-// --gpu-budget SIZE (suffixes K, M, G; at least 16M) in bytes, 0 when not given.
-Result<uint64_t> gpuBudgetFromArgs(const Args& a);
+// --gpu-budget SIZE (suffixes K, M, G; at least 16M) or off (every tile resident); when not
+// given, the default for the pack at packPath (defaultGpuBudget: a budget only where its pages
+// outgrow the memory; SCANATLAS_MEMORY=SIZE stands in for this machine's RAM). Before GL: once
+// a context exists, boundByGpuMemory (viewer/egl_context.h) adds what the GPU reports.
+Result<GpuBudget> gpuBudgetFor(const Args& a, const std::string& packPath);
 inline constexpr const char* kGpuBudgetHelp =
     "  --gpu-budget SIZE      keep at most SIZE of tiles on the GPU (suffixes K, M, G): each visible\n"
     "                         cell's tile at the level its texels on screen ask for (coarser where a\n"
     "                         texel is under a pixel, all coarser when the view does not fit), tiles\n"
     "                         decoded in the background, the cells seen longest ago evicted first;\n"
-    "                         parallax, slices, auto and points modes\n";
+    "                         parallax, slices, auto and points modes. Default: none while the pack's\n"
+    "                         pages fit in a quarter of RAM and half the GPU's memory (where the\n"
+    "                         driver reports it: NVIDIA, AMD), else the smaller of those; 'off'\n"
+    "                         uploads every tile whatever its size. SCANATLAS_MEMORY=SIZE in the\n"
+    "                         environment stands in for the machine's RAM\n";
 // A frame of a streamed renderer once its tiles have settled for this view (frames rendered until
 // none is pending, at most maxFrames); `frames` the frames it took.
 Status renderSettled(Renderer& r, const Camera& cam, const RenderSettings& rs, FrameResult& out, unsigned readBack,

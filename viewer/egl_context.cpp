@@ -1,10 +1,13 @@
 #include "viewer/egl_context.h"
 
+#include "viewer/tile_cache.h"
+
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <vector>
@@ -100,6 +103,37 @@ Status EglContext::init() {
   }
   return Status::internal("no OpenGL 4.5 core context could be created through EGL (tried:" + tried +
                           " default). On Debian install libegl-mesa0 and libgl1-mesa-dri (scripts/deps.sh).");
+}
+
+uint64_t gpuMemoryBytes() {
+  GLint n = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &n);
+  bool nvx = false, ati = false;
+  for (GLint i = 0; i < n; ++i) {
+    const char* e = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, GLuint(i)));
+    if (!e) continue;
+    nvx = nvx || std::strcmp(e, "GL_NVX_gpu_memory_info") == 0;
+    ati = ati || std::strcmp(e, "GL_ATI_meminfo") == 0;
+  }
+  GLint kib[4] = {0, 0, 0, 0};
+  if (nvx) glGetIntegerv(0x9047, kib);  // GPU_MEMORY_INFO_DEDICATED_VIDMEM_NVX, KiB
+  else if (ati) glGetIntegerv(0x87FC, kib);  // TEXTURE_FREE_MEMORY_ATI: total free, KiB (first of four)
+  while (glGetError() != GL_NO_ERROR) {
+  }
+  return kib[0] > 0 ? uint64_t(kib[0]) * 1024 : 0;
+}
+
+void boundByGpuMemory(GpuBudget& b, const char* tool, bool quiet) {
+  if (!b.automatic) return;
+  const uint64_t gpu = gpuMemoryBytes();
+  b.bytes = defaultGpuBudget(b.atlas, b.ram, gpu);
+  if (!b.bytes || quiet) return;
+  const double mib = 1048576.0;
+  std::fprintf(stderr,
+               "%s: the pack's pages (%.0f MiB) are more than a quarter of this machine's memory (%.0f MiB)%s: tiles "
+               "stream under a GPU budget of %.0f MiB (--gpu-budget SIZE to choose, --gpu-budget off to upload them all)\n",
+               tool, b.atlas / mib, b.ram / mib,
+               gpu ? (" or half the GPU's (" + std::to_string(uint64_t(gpu / mib)) + " MiB)").c_str() : "", b.bytes / mib);
 }
 
 }  // namespace sa

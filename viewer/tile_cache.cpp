@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <unistd.h>
+
 namespace sa {
 namespace {
 
@@ -116,6 +118,24 @@ Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std
   for (uint32_t k = 0; k < std::min<size_t>(keepFrom, out.size()); ++k)
     out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
   return s;
+}
+
+uint64_t atlasBytes(const PackReader& pack) {
+  const uint64_t texel = 2 + (pack.hasNormals() ? kNormalBytes : 0) + (pack.hasColor() ? 4 : 0);
+  return pack.pageTexels() * pack.meta().pageCount * texel;
+}
+
+uint64_t physicalMemoryBytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES), size = sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && size > 0 ? uint64_t(pages) * uint64_t(size) : 0;
+}
+
+uint64_t defaultGpuBudget(uint64_t atlas, uint64_t ram, uint64_t gpu) {
+  uint64_t room = UINT64_MAX;
+  if (ram > 0) room = ram / 4;
+  if (gpu > 0) room = std::min(room, gpu / 2);
+  if (atlas <= room) return 0;
+  return std::max<uint64_t>(room, uint64_t(16) << 20);
 }
 
 uint64_t levelBytes(const std::vector<TileImage>& levels) {

@@ -37,6 +37,22 @@ Status buildLevels(const PackReader& pack, uint32_t i, uint32_t keepFrom, std::v
 // footprint is (coverage edges stay where they were); height and colour the covered texels'
 // weighted mean, the normal their normalized weighted mean.
 TileImage coarserLevel(const TileImage& t);
+// The bytes the pack's pages take on the GPU when uploaded whole.
+uint64_t atlasBytes(const PackReader& pack);
+// This machine's physical memory (0 where unknown).
+uint64_t physicalMemoryBytes();
+// The GPU budget when --gpu-budget is not given: none (0) while the whole atlas fits in a
+// quarter of RAM (its decoded pages and the driver's copy, which on a software or integrated
+// GPU is RAM too) and, where the GPU says (gpuBytes > 0), in half of its memory; else the
+// smaller of those, at least 16 MiB.
+uint64_t defaultGpuBudget(uint64_t atlasBytes, uint64_t ramBytes, uint64_t gpuBytes);
+// --gpu-budget resolved for one pack: bytes (0: every tile resident); automatic: not given, so
+// the default, which the GPU's own memory may still lower once a GL context exists.
+struct GpuBudget {
+  uint64_t bytes = 0;
+  bool automatic = false;
+  uint64_t atlas = 0, ram = 0;
+};
 // The bytes of texels a cell's levels hold.
 uint64_t levelBytes(const std::vector<TileImage>& levels);
 

@@ -1,5 +1,7 @@
 #include "window/viewer_app.h"
 
+#include "viewer/egl_context.h"
+
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
 #define GLFW_INCLUDE_NONE
@@ -511,7 +513,7 @@ void drawPanel(AppState& s, GLFWwindow* win) {
 Status loadViewerInputs(AppState& s, const std::string& packPath, const ViewerOptions& opt, std::vector<ScriptCommand>& script) {
   s.packPath = packPath;
   // Tiles decoded as the window needs them; under --gpu-budget into the cache only (no page memory).
-  Status st = s.pack.open(packPath, opt.gpuBudget ? PageLoad::kTiles : PageLoad::kOnDemand);
+  Status st = s.pack.open(packPath, opt.gpuBudget.bytes ? PageLoad::kTiles : PageLoad::kOnDemand);
   if (!st) return Status::badInput(st.message() + "\n(run 'scanatlas info' on it, or repack)");
   std::vector<std::string> inputs = packSources(s.pack);  // the points mode reads them
   inputs.insert(inputs.end(), {packPath, opt.scriptPath, opt.groovesPath});
@@ -750,7 +752,9 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
   GLFWwindow* win = openWindow(opt, title, opt.vsync && script.empty());
   if (!win) return 1;
   int rc = 0;
-  st = s.renderer->init(s.pack, /*streamPages=*/true, opt.gpuBudget);
+  GpuBudget budget = opt.gpuBudget;
+  boundByGpuMemory(budget, "view", opt.quiet);
+  st = s.renderer->init(s.pack, /*streamPages=*/true, budget.bytes);
   if (!st) {
     std::fprintf(stderr, "scanatlas: error: %s\n", st.message().c_str());
     rc = 1;

@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <string>
 
+#include "viewer/tile_cache.h"
+
 namespace sa {
 
 struct ViewerOptions {
@@ -13,7 +15,7 @@ struct ViewerOptions {
   int width = 1280, height = 800;
   bool vsync = true;
   bool quiet = false;
-  uint64_t gpuBudget = 0;        // --gpu-budget bytes (0: the whole atlas resident)
+  GpuBudget gpuBudget;           // --gpu-budget (bytes 0: the whole atlas resident)
 };
 
 // Returns the process exit code (0 ok, 2 bad input, 1 internal); prints its own errors.

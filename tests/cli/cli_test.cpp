@@ -402,6 +402,23 @@ TEST(Cli, ConvertInfoAndMixedPackOnRealFiles) {
   EXPECT_LE(gj["budget_error"]["iou_min"].get<double>(), gj["budget_error"]["iou_mean"].get<double>());
   EXPECT_LE(gj["budget_error"]["depth_median_texels_max"].get<double>(), 1.0);
   EXPECT_EQ(run("bench " + d.file("mix.hfa") + " --budget-error --orbit 1 --frames 1").code, 2) << "needs --gpu-budget";
+  // Without --gpu-budget a pack whose pages outgrow a quarter of the memory streams under a
+  // default budget (SCANATLAS_MEMORY stands in for the RAM); 'off' uploads everything.
+  setenv("SCANATLAS_MEMORY", "40M", 1);
+  CmdResult db = runErr("bench " + d.file("mix.hfa") + " --orbit 1 --size 64x64 --warmup 0 --frames 1 --json", d.file("db.err"));
+  setenv("SCANATLAS_MEMORY", "lots", 1);
+  const int badMemory = run("render " + d.file("mix.hfa") + " -o " + d.file("m.png")).code;
+  unsetenv("SCANATLAS_MEMORY");
+  ASSERT_EQ(db.code, 0) << db.err;
+  EXPECT_NE(db.err.find("tiles stream under a GPU budget of 16 MiB"), std::string::npos) << db.err;
+  auto dj = nlohmann::json::parse(db.out);
+  EXPECT_EQ(dj["gpu_budget"].get<uint64_t>(), uint64_t(16) << 20);
+  EXPECT_TRUE(dj["gpu_budget_default"].get<bool>());
+  EXPECT_EQ(badMemory, 2);
+  EXPECT_FALSE(std::filesystem::exists(d.file("m.png")));
+  CmdResult ob = run("bench " + d.file("mix.hfa") + " --gpu-budget off --orbit 1 --size 64x64 --warmup 0 --frames 1 --json");
+  ASSERT_EQ(ob.code, 0) << ob.out;
+  EXPECT_FALSE(nlohmann::json::parse(ob.out).contains("gpu_budget"));
 
   // Failures: exit 2 with no output file and no temporary left behind.
   EXPECT_EQ(run("convert " + las + " -o " + d.file("x.las")).code, 2);  // no LAS writer

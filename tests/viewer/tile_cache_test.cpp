@@ -125,6 +125,24 @@ TEST(TileMips, EachLevelStaysWhereTheShaderDrawsIt) {
   }
 }
 
+// Without --gpu-budget: no budget while the pages fit a quarter of RAM and half the GPU's
+// memory (where it is known), else the smaller room, never under 16 MiB.
+TEST(GpuBudgetDefault, OnlyWhereThePagesOutgrowTheMemory) {
+  const uint64_t M = uint64_t(1) << 20, G = uint64_t(1) << 30;
+  EXPECT_EQ(defaultGpuBudget(100 * M, 24 * G, 0), 0u);
+  EXPECT_EQ(defaultGpuBudget(6 * G, 24 * G, 0), 0u) << "exactly a quarter still fits";
+  EXPECT_EQ(defaultGpuBudget(7 * G, 24 * G, 0), 6 * G);
+  EXPECT_EQ(defaultGpuBudget(3 * G, 24 * G, 4 * G), 2 * G) << "half the GPU's memory";
+  EXPECT_EQ(defaultGpuBudget(3 * G, 24 * G, 8 * G), 0u);
+  EXPECT_EQ(defaultGpuBudget(100 * M, 64 * M, 0), 16 * M) << "at least 16 MiB";
+  EXPECT_EQ(defaultGpuBudget(100 * G, 0, 0), 0u) << "nothing known: everything resident, as before";
+  EXPECT_GT(physicalMemoryBytes(), 64 * M);
+  test::TempDir d;
+  PackReader p;
+  ASSERT_TRUE(p.open(packSphere(d), PageLoad::kNone).isOk());
+  EXPECT_EQ(atlasBytes(p), p.pageTexels() * p.meta().pageCount * (2 + (p.hasNormals() ? kNormalBytes : 0) + (p.hasColor() ? 4 : 0)));
+}
+
 TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
   test::TempDir d;
   PackReader p;
