@@ -263,11 +263,9 @@ Status measureBudgetError(Renderer& budgeted, const std::string& packPath, const
   const double texel = whole.meta().texelSize;
   FrameResult a, b;
   for (size_t v = 0; v < cams.size(); ++v) {
-    uint64_t frames = 1;
-    SA_RETURN_IF_ERROR(budgeted.render(cams[v], rs, b, 0u));
-    for (; budgeted.tilesPending() && frames < 100000; ++frames) SA_RETURN_IF_ERROR(budgeted.render(cams[v], rs, b, 0u));
+    uint64_t frames = 0;
+    SA_RETURN_IF_ERROR(renderSettled(budgeted, cams[v], rs, b, kReadDepth, frames));
     if (budgeted.tilesPending()) return Status::internal("bench --budget-error: view " + std::to_string(v) + " did not settle");
-    SA_RETURN_IF_ERROR(budgeted.render(cams[v], rs, b, kReadDepth));
     SA_RETURN_IF_ERROR(full.render(cams[v], rs, a, kReadDepth));
     const RenderAgreement g = compareRenders(a.depth, b.depth, texel);
     if (print)
