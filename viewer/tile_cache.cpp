@@ -8,6 +8,12 @@
 namespace sa {
 namespace {
 
+uint32_t nextPow2(uint32_t v) {
+  uint32_t p = 1;
+  while (p < v) p <<= 1;
+  return p;
+}
+
 size_t at(const TileImage& t, int i, int j) { return size_t(j + 1) * (t.w + 2) + size_t(i + 1); }
 
 // The gutter: the edge texels repeated (FORMAT.md).
@@ -138,97 +144,68 @@ uint64_t levelBytes(const std::vector<TileImage>& levels) {
   return b;
 }
 
-BlockAllocator::BlockAllocator(uint32_t size, uint32_t layers) : size_(size), freeRows_(layers, std::vector<Span>{{0, size}}) {}
-
-// Gives [at, at + len) back to a sorted list of free spans, merging with its neighbours.
-template <class S>
-static void giveBack(std::vector<S>& v, uint32_t at, uint32_t len) {
-  auto it = std::lower_bound(v.begin(), v.end(), at, [](const S& s, uint32_t x) { return s.at < x; });
-  it = v.insert(it, S{at, len});
-  if (it + 1 != v.end() && it->at + it->len == (it + 1)->at) {
-    it->len += (it + 1)->len;
-    v.erase(it + 1);
-  }
-  if (it != v.begin() && (it - 1)->at + (it - 1)->len == it->at) {
-    (it - 1)->len += it->len;
-    v.erase(it);
+BlockAllocator::BlockAllocator(uint32_t size, uint32_t layers) : size_(size) {
+  for (uint32_t l = 0; l < layers; ++l) {
+    roots_.push_back(int(nodes_.size()));
+    nodes_.push_back({l, 0, 0, size, size, -1, -1, false});
   }
 }
 
-bool BlockAllocator::place(int si, uint32_t w, Block& out) {
-  Shelf& s = shelves_[size_t(si)];
-  for (size_t k = 0; k < s.free.size(); ++k) {
-    Span& f = s.free[k];
-    if (f.len < w) continue;
-    out = {s.layer, f.at, s.y, w, s.h, si};
-    f.at += w;
-    f.len -= w;
-    if (f.len == 0) s.free.erase(s.free.begin() + ptrdiff_t(k));
-    s.used += w;
-    used_ += uint64_t(w) * s.h;
-    return true;
-  }
-  return false;
-}
-
-// A new shelf h tall in the first layer with that many free rows, or -1.
-int BlockAllocator::openShelf(uint32_t h) {
-  for (uint32_t l = 0; l < freeRows_.size(); ++l)
-    for (size_t k = 0; k < freeRows_[l].size(); ++k) {
-      Span& r = freeRows_[l][k];
-      if (r.len < h) continue;
-      Shelf s;
-      s.layer = l;
-      s.y = r.at;
-      s.h = h;
-      s.free = {{0, size_}};
-      s.live = true;
-      r.at += h;
-      r.len -= h;
-      if (r.len == 0) freeRows_[l].erase(freeRows_[l].begin() + ptrdiff_t(k));
-      int id;
-      if (!deadShelves_.empty()) {
-        id = deadShelves_.back();
-        deadShelves_.pop_back();
-        shelves_[size_t(id)] = std::move(s);
-      } else {
-        id = int(shelves_.size());
-        shelves_.push_back(std::move(s));
-      }
-      return id;
-    }
-  return -1;
+// The smallest free leaf under n that holds w x h, or -1.
+int BlockAllocator::find(int n, uint32_t w, uint32_t h) const {
+  const Node& d = nodes_[n];
+  if (d.w < w || d.h < h) return -1;
+  if (d.child < 0) return d.used ? -1 : n;
+  const int a = find(d.child, w, h), b = find(d.child + 1, w, h);
+  if (a < 0 || b < 0) return a < 0 ? b : a;
+  return uint64_t(nodes_[a].w) * nodes_[a].h <= uint64_t(nodes_[b].w) * nodes_[b].h ? a : b;
 }
 
 bool BlockAllocator::allocate(uint32_t w, uint32_t h, Block& out) {
-  const uint32_t bw = roundUp(w), bh = roundUp(h);
-  if (bw > size_ || bh > size_) return false;
-  for (size_t i = 0; i < shelves_.size(); ++i)
-    if (shelves_[i].live && shelves_[i].h == bh && place(int(i), bw, out)) return true;
-  const int fresh = openShelf(bh);
-  if (fresh >= 0) return place(fresh, bw, out);
-  int best = -1;  // the lowest taller shelf with room, less than twice as tall
-  for (size_t i = 0; i < shelves_.size(); ++i) {
-    const Shelf& s = shelves_[i];
-    if (!s.live || s.h <= bh || s.h >= 2 * bh || (best >= 0 && s.h >= shelves_[size_t(best)].h)) continue;
-    bool room = false;
-    for (const Span& f : s.free) room = room || f.len >= bw;
-    if (room) best = int(i);
+  const uint32_t bw = nextPow2(std::max(w, 1u)), bh = nextPow2(std::max(h, 1u));
+  int n = -1;
+  for (int r : roots_) {
+    const int f = find(r, bw, bh);
+    if (f >= 0 && (n < 0 || uint64_t(nodes_[f].w) * nodes_[f].h < uint64_t(nodes_[n].w) * nodes_[n].h)) n = f;
   }
-  return best >= 0 && place(best, bw, out);
+  if (n < 0) return false;
+  for (;;) {  // split down to the block's size, the longer side first
+    const Node d = nodes_[n];
+    const bool splitW = d.w / 2 >= bw && (d.w >= d.h || d.h / 2 < bh);
+    const bool splitH = !splitW && d.h / 2 >= bh;
+    if (!splitW && !splitH) break;
+    int c;
+    if (!freeNodes_.empty()) {
+      c = freeNodes_.back();
+      freeNodes_.pop_back();
+    } else {
+      c = int(nodes_.size());
+      nodes_.resize(nodes_.size() + 2);
+    }
+    const uint32_t hw = splitW ? d.w / 2 : d.w, hh = splitW ? d.h : d.h / 2;
+    nodes_[c] = {d.layer, d.x, d.y, hw, hh, n, -1, false};
+    nodes_[c + 1] = {d.layer, splitW ? d.x + hw : d.x, splitW ? d.y : d.y + hh, hw, hh, n, -1, false};
+    nodes_[n].child = c;
+    n = c;
+  }
+  Node& d = nodes_[n];
+  d.used = true;
+  used_ += uint64_t(d.w) * d.h;
+  out = {d.layer, d.x, d.y, d.w, d.h, n};
+  return true;
 }
 
 void BlockAllocator::release(const Block& b) {
-  if (b.node < 0 || size_t(b.node) >= shelves_.size() || !shelves_[size_t(b.node)].live) return;
-  Shelf& s = shelves_[size_t(b.node)];
-  giveBack(s.free, b.x, b.w);
-  s.used -= b.w;
+  if (b.node < 0 || !nodes_[b.node].used) return;
+  nodes_[b.node].used = false;
   used_ -= uint64_t(b.w) * b.h;
-  if (s.used > 0) return;
-  giveBack(freeRows_[s.layer], s.y, s.h);  // the shelf's last block: its rows back to the layer
-  s.live = false;
-  s.free.clear();
-  deadShelves_.push_back(b.node);
+  for (int p = nodes_[b.node].parent; p >= 0; p = nodes_[p].parent) {  // merge free buddies upward
+    const int c = nodes_[p].child;
+    const Node &a = nodes_[c], &d = nodes_[c + 1];
+    if (a.child >= 0 || d.child >= 0 || a.used || d.used) break;
+    freeNodes_.push_back(c);
+    nodes_[p].child = -1;
+  }
 }
 
 TileResidency::TileResidency(std::span<const CellRecord> cells, uint32_t layerSize, uint32_t layers, uint64_t texelBytes)
@@ -270,7 +247,7 @@ uint32_t TileResidency::levels(uint32_t cell) const {
 uint64_t TileResidency::blockTexels(uint32_t cell, uint32_t level) const {
   uint32_t w, h;
   levelSize(cells_[cell], level, w, h);
-  return BlockAllocator::blockTexels(w + 2, h + 2);
+  return uint64_t(nextPow2(w + 2)) * nextPow2(h + 2);
 }
 
 void TileResidency::drop(uint32_t cell) {
@@ -318,34 +295,17 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
     const uint32_t lv = px >= 1 ? 0 : uint32_t(std::floor(std::log2(1 / std::max(px, 1e-9))));
     wants.push_back({cell, std::min(lv, levels(cell) - 1), px});
   }
-  // Coarser everywhere until the visible set fits in 70 % of the cache (the rest: fragmentation);
-  // then, largest on screen first, cells go back one level finer while the set still fits, so a
-  // view that does not fit is drawn coarser only where its texels are smallest on screen (one
-  // level is 4x the texels: a uniform bias left about half the cache unused).
-  auto level = [&](const Want& w, int bias) { return std::min(w.level + uint32_t(bias), levels(w.cell) - 1); };
-  const uint64_t room = alloc_.capacityTexels() * 7 / 10;
-  uint64_t texels = 0;
+  // Coarser everywhere until the visible set fits in 70 % of the cache (the rest: fragmentation).
+  auto level = [&](const Want& w) { return std::min(w.level + uint32_t(out.bias), levels(w.cell) - 1); };
   for (;; ++out.bias) {
-    texels = 0;
-    for (const Want& w : wants) texels += blockTexels(w.cell, level(w, out.bias));
-    if (texels <= room || out.bias >= 24) break;
+    uint64_t texels = 0;
+    for (const Want& w : wants) texels += blockTexels(w.cell, level(w));
+    if (texels * 10 <= alloc_.capacityTexels() * 7 || out.bias >= 24) break;
   }
   std::sort(wants.begin(), wants.end(), [](const Want& a, const Want& b) { return a.texelPx > b.texelPx; });
-  std::vector<uint32_t> chosen(wants.size());
-  for (size_t k = 0; k < wants.size(); ++k) {
-    chosen[k] = level(wants[k], out.bias);
-    if (out.bias == 0) continue;
-    const uint32_t finer = level(wants[k], out.bias - 1);
-    const uint64_t more = blockTexels(wants[k].cell, finer) - blockTexels(wants[k].cell, chosen[k]);
-    if (finer < chosen[k] && texels + more <= room) {
-      chosen[k] = finer;
-      texels += more;
-    }
-  }
   uint64_t bytes = 0;
-  for (size_t k = 0; k < wants.size(); ++k) {
-    const Want& w = wants[k];
-    uint32_t lv = chosen[k];
+  for (const Want& w : wants) {
+    const uint32_t lv = level(w);
     if (lv > w.level) ++out.coarsened;
     if (level_[w.cell] == int(lv)) continue;
     if (availFrom[w.cell] > lv) {
@@ -365,18 +325,6 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
       drop(w.cell);
       ok = makeRoom(lw + 2, lh + 2, b, out);
     }
-    // No block at that level even after evicting (the plan's room is an estimate: shelves of
-    // other heights may hold the rows): the cell stays drawn at the next coarser level that
-    // gets one, or at the one it has, rather than waiting for a block that may never come.
-    bool kept = false;
-    for (uint32_t c2 = lv + 1; !ok && !kept && c2 < levels(w.cell); ++c2) {
-      kept = level_[w.cell] == int(c2);
-      if (kept) break;
-      levelSize(cells_[w.cell], c2, lw, lh);
-      ok = makeRoom(lw + 2, lh + 2, b, out);
-      if (ok) lv = c2;
-    }
-    if (kept) continue;
     if (!ok) {
       ++out.waiting;
       continue;

@@ -56,43 +56,31 @@ struct GpuBudget {
 // The bytes of texels a cell's levels hold.
 uint64_t levelBytes(const std::vector<TileImage>& levels);
 
-// Rectangles over `layers` square layers of `size` texels, on shelves: a block's sides are
-// rounded up to multiples of 8 texels; each shelf is a strip across a layer as tall as the
-// blocks it holds, opened where the layer has free rows and given back when its last block is.
-// (A buddy allocator's powers of two gave a 35 x 35 tile a 64 x 64 block: 3.3x its texels.)
+// A buddy allocator of power-of-two rectangles over `layers` square layers of `size` texels.
 class BlockAllocator {
  public:
   struct Block {
     uint32_t layer = 0, x = 0, y = 0, w = 0, h = 0;
-    int node = -1;  // its shelf
+    int node = -1;
   };
-  static constexpr uint32_t kQuantum = 8;
-  static uint32_t roundUp(uint32_t v) { return (std::max(v, 1u) + kQuantum - 1) / kQuantum * kQuantum; }
-  // The texels a w x h request takes when it goes on a shelf of its own height.
-  static uint64_t blockTexels(uint32_t w, uint32_t h) { return uint64_t(roundUp(w)) * roundUp(h); }
   BlockAllocator(uint32_t size, uint32_t layers);
-  // A block of at least w x h texels: on a shelf of its rounded height, else a new shelf, else a
-  // shelf less than twice as tall; false when none has room.
+  // A block of at least w x h texels (rounded up to powers of two); false when none is free.
   bool allocate(uint32_t w, uint32_t h, Block& out);
   void release(const Block& b);
   uint64_t usedTexels() const { return used_; }
-  uint64_t capacityTexels() const { return uint64_t(size_) * size_ * freeRows_.size(); }
+  uint64_t capacityTexels() const { return uint64_t(size_) * size_ * roots_.size(); }
 
  private:
-  struct Span {
-    uint32_t at, len;
+  struct Node {
+    uint32_t layer, x, y, w, h;
+    int parent, child;  // child: the first of two (-1: a leaf)
+    bool used;
   };
-  struct Shelf {
-    uint32_t layer = 0, y = 0, h = 0, used = 0;  // used: texels of width taken
-    std::vector<Span> free;                     // free x ranges, sorted, never adjacent
-    bool live = false;
-  };
-  bool place(int shelf, uint32_t w, Block& out);
-  int openShelf(uint32_t h);
+  int find(int n, uint32_t w, uint32_t h) const;
   uint32_t size_;
-  std::vector<std::vector<Span>> freeRows_;  // per layer: free y ranges, sorted, never adjacent
-  std::vector<Shelf> shelves_;
-  std::vector<int> deadShelves_;  // slots to reuse
+  std::vector<int> roots_;
+  std::vector<Node> nodes_;
+  std::vector<int> freeNodes_;  // recycled node slots (pairs)
   uint64_t used_ = 0;
 };
 
