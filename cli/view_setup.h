@@ -34,8 +34,9 @@ Result<GpuBudget> gpuBudgetFor(const Args& a, const std::string& packPath);
 inline constexpr const char* kGpuBudgetHelp =
     "  --gpu-budget SIZE      keep at most SIZE of tiles on the GPU (suffixes K, M, G): each visible\n"
     "                         cell's tile at the level its texels on screen ask for (coarser where a\n"
-    "                         texel is under a pixel, all coarser when the view does not fit), tiles\n"
-    "                         decoded in the background, the cells seen longest ago evicted first;\n"
+    "                         texel is under a pixel; when the view does not fit, coarser except\n"
+    "                         where it is largest on screen and still fits), tiles decoded in the\n"
+    "                         background, the cells seen longest ago evicted first;\n"
     "                         parallax, slices, auto and points modes. Default: none while the pack's\n"
     "                         pages fit in a quarter of RAM and half the GPU's memory (where the\n"
     "                         driver reports it: NVIDIA, AMD), else the smaller of those; 'off'\n"

@@ -412,11 +412,11 @@ void Renderer::takeLevels() {
   }
 }
 
-// --gpu-budget, after a frame's uploads: memory is kept for the levels on the GPU and the
-// coarser ones only; cells evicted, or neither resident nor visible this frame, let go of theirs.
+// --gpu-budget, after a frame's uploads: memory is kept for the levels planned (on the GPU, or
+// waiting for a free block) and the coarser ones only; cells evicted, or neither resident nor visible this frame, let go of theirs.
 void Renderer::trimLevels(const TileResidency::Frame& plan) {
   Gl& g = *gl_;
-  for (const TileResidency::Upload& u : plan.uploads) dropLevels(u.cell, u.level);
+  for (const TileResidency::Upload& u : plan.uploads) dropLevels(u.cell, u.wanted);  // the planned level stays for a later try
   for (uint32_t c : plan.dropped) dropLevels(c, TileResidency::kNoLevel);
   size_t keep = 0;
   for (uint32_t c : g.held) {

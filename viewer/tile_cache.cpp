@@ -279,10 +279,6 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
                                          const Eigen::Vector3d& eyeRel, double focalPx, uint64_t maxUploadBytes) {
   ++frame_;
   Frame out;
-  struct Want {
-    uint32_t cell, level;
-    double texelPx;
-  };
   std::vector<Want> wants;
   wants.reserve(visible.size());
   for (uint32_t cell : visible) {
@@ -295,21 +291,17 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
     const uint32_t lv = px >= 1 ? 0 : uint32_t(std::floor(std::log2(1 / std::max(px, 1e-9))));
     wants.push_back({cell, std::min(lv, levels(cell) - 1), px});
   }
-  // Coarser everywhere until the visible set fits in 70 % of the cache (the rest: fragmentation).
-  auto level = [&](const Want& w) { return std::min(w.level + uint32_t(out.bias), levels(w.cell) - 1); };
-  for (;; ++out.bias) {
-    uint64_t texels = 0;
-    for (const Want& w : wants) texels += blockTexels(w.cell, level(w));
-    if (texels * 10 <= alloc_.capacityTexels() * 7 || out.bias >= 24) break;
-  }
-  std::sort(wants.begin(), wants.end(), [](const Want& a, const Want& b) { return a.texelPx > b.texelPx; });
+  std::vector<uint32_t> lv = fitLevels(wants, out.bias);
+  std::vector<size_t> order(wants.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return wants[a].texelPx > wants[b].texelPx; });
   uint64_t bytes = 0;
-  for (const Want& w : wants) {
-    const uint32_t lv = level(w);
-    if (lv > w.level) ++out.coarsened;
-    if (level_[w.cell] == int(lv)) continue;
-    if (availFrom[w.cell] > lv) {
-      out.needs.push_back({w.cell, lv});
+  for (size_t k : order) {
+    const Want& w = wants[k];
+    if (lv[k] > w.level) ++out.coarsened;
+    if (level_[w.cell] == int(lv[k])) continue;
+    if (availFrom[w.cell] > lv[k]) {
+      out.needs.push_back({w.cell, lv[k]});
       ++out.waiting;
       continue;
     }
@@ -317,28 +309,67 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
       ++out.waiting;
       continue;
     }
-    uint32_t lw, lh;
-    levelSize(cells_[w.cell], lv, lw, lh);
-    BlockAllocator::Block b;
-    bool ok = makeRoom(lw + 2, lh + 2, b, out);
-    if (!ok && level_[w.cell] >= 0 && int(lv) > level_[w.cell]) {  // going coarser: its own block makes room
-      drop(w.cell);
-      ok = makeRoom(lw + 2, lh + 2, b, out);
-    }
-    if (!ok) {
-      ++out.waiting;
-      continue;
-    }
-    drop(w.cell);
-    level_[w.cell] = int(lv);
-    flags_[w.cell] = 1;
-    block_[w.cell] = b;
-    pos_[w.cell] = uint32_t(resident_.size());
-    resident_.push_back(w.cell);
-    out.uploads.push_back({w.cell, lv, b});
-    bytes += uint64_t(lw + 2) * (lh + 2) * texelBytes_;
+    bytes += place(w.cell, lv[k], out);
   }
   return out;
+}
+
+// Every visible cell `bias` levels coarser than it asks for, the fewest that fit the set in 70 %
+// of the cache (the rest: the blocks' fragmentation); then, largest on screen first, a cell goes
+// back one level finer while the set still fits, so the cache is filled where it shows most
+// instead of a quarter used after the last coarsening step.
+std::vector<uint32_t> TileResidency::fitLevels(const std::vector<Want>& wants, int& bias) const {
+  const uint64_t room = alloc_.capacityTexels() * 7 / 10;
+  auto at = [&](const Want& w, int b) { return std::min(w.level + uint32_t(b), levels(w.cell) - 1); };
+  uint64_t texels = 0;
+  for (bias = 0;; ++bias) {
+    texels = 0;
+    for (const Want& w : wants) texels += blockTexels(w.cell, at(w, bias));
+    if (texels <= room || bias >= 24) break;
+  }
+  std::vector<uint32_t> lv(wants.size());
+  for (size_t k = 0; k < wants.size(); ++k) lv[k] = at(wants[k], bias);
+  if (bias == 0) return lv;
+  std::vector<size_t> order(wants.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return wants[a].texelPx > wants[b].texelPx; });
+  for (size_t k : order) {
+    if (lv[k] <= wants[k].level) continue;
+    const uint64_t now = blockTexels(wants[k].cell, lv[k]), finer = blockTexels(wants[k].cell, lv[k] - 1);
+    if (texels - now + finer > room) continue;
+    texels += finer - now;
+    --lv[k];
+  }
+  return lv;
+}
+
+// Gives cell its block at level lv, evicting cells not seen this frame. Where the free space is
+// too broken up for it, the cell takes the finest coarser level that finds a block (its own
+// block given up first when that is what frees the room), so a view always settles. Returns the
+// bytes uploaded (0 when the cell keeps what it has or finds no block: then it waits).
+uint64_t TileResidency::place(uint32_t cell, uint32_t lv, Frame& out) {
+  for (uint32_t l = lv; l < levels(cell); ++l) {
+    if (level_[cell] == int(l)) return 0;  // what it holds is the best that fits
+    uint32_t lw, lh;
+    levelSize(cells_[cell], l, lw, lh);
+    BlockAllocator::Block b;
+    bool ok = makeRoom(lw + 2, lh + 2, b, out);
+    if (!ok && level_[cell] >= 0 && int(l) > level_[cell]) {  // going coarser: its own block makes room
+      drop(cell);
+      ok = makeRoom(lw + 2, lh + 2, b, out);
+    }
+    if (!ok) continue;
+    drop(cell);
+    level_[cell] = int(l);
+    flags_[cell] = 1;
+    block_[cell] = b;
+    pos_[cell] = uint32_t(resident_.size());
+    resident_.push_back(cell);
+    out.uploads.push_back({cell, l, b, lv});
+    return uint64_t(lw + 2) * (lh + 2) * texelBytes_;
+  }
+  ++out.waiting;
+  return 0;
 }
 
 }  // namespace sa

@@ -92,6 +92,7 @@ class TileResidency {
   struct Upload {
     uint32_t cell = 0, level = 0;
     BlockAllocator::Block block;
+    uint32_t wanted = 0;  // the level planned; finer than `level` where no block was free for it
   };
   struct Need {
     uint32_t cell = 0, level = 0;
@@ -120,6 +121,12 @@ class TileResidency {
   const uint8_t* residentFlags() const { return flags_.data(); }
 
  private:
+  struct Want {
+    uint32_t cell, level;  // the level its texels on screen ask for
+    double texelPx;        // a level-0 texel's size on screen, in pixels
+  };
+  std::vector<uint32_t> fitLevels(const std::vector<Want>& wants, int& bias) const;
+  uint64_t place(uint32_t cell, uint32_t lv, Frame& out);
   uint64_t blockTexels(uint32_t cell, uint32_t level) const;
   bool makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out, Frame& f);
   void drop(uint32_t cell);

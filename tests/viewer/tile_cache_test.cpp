@@ -204,4 +204,59 @@ TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
 }
 
 }  // namespace
+// A view that does not fit: every cell `bias` levels coarser, then cells go back one level finer
+// while the set fits, so more of the cache is used than the uniform bias leaves; and from any
+// camera the plan settles (no cell waits for a block) within a few frames, where a block at the
+// planned level cannot be found, at a coarser one.
+TEST(TileResidency, AViewThatDoesNotFitIsFinerWhereItFitsAndAlwaysSettles) {
+  test::TempDir d;
+  PackReader p;
+  ASSERT_TRUE(p.open(packSphere(d)).isOk());
+  const uint32_t n = uint32_t(p.cells().size());
+  std::vector<uint32_t> all(n);
+  for (uint32_t i = 0; i < n; ++i) all[i] = i;
+  std::vector<uint8_t> decoded(n, 0);
+  const Eigen::Vector3d origin(p.meta().origin);
+  auto pow2 = [](uint32_t v) {
+    uint32_t q = 1;
+    while (q < v) q <<= 1;
+    return q;
+  };
+  auto block = [&](uint32_t c, uint32_t level) {
+    uint32_t w, h;
+    TileResidency::levelSize(p.cells()[c], level, w, h);
+    return uint64_t(pow2(w + 2)) * pow2(h + 2);
+  };
+  TileResidency small(p.cells(), 256, 1, 1);  // bytes = texels
+  auto f = small.plan(all, decoded.data(), Eigen::Vector3d(0, 0, 4) - origin, 1e6, UINT64_MAX);
+  ASSERT_GT(f.bias, 0);
+  uint64_t uniform = 0;
+  uint32_t finer = 0;
+  for (uint32_t c = 0; c < n; ++c) {
+    ASSERT_GE(small.level(c), 0) << c;
+    const uint32_t atBias = std::min<uint32_t>(uint32_t(f.bias), small.levels(c) - 1);
+    uniform += block(c, atBias);
+    EXPECT_LE(uint32_t(small.level(c)), atBias) << c;
+    finer += uint32_t(small.level(c)) < atBias;
+  }
+  std::printf("bias %d: %u of %u cells a level finer, %.1f %% of the cache used (uniform bias: %.1f %%)\n", f.bias,
+              finer, n, 100.0 * small.residentBytes() / small.capacityBytes(), 100.0 * uniform / small.capacityBytes());
+  EXPECT_GT(finer, 0u);
+  EXPECT_GT(small.residentBytes(), uniform);
+  EXPECT_LE(small.residentBytes() * 10, small.capacityBytes() * 7);
+  // Cameras all around, near and far, each held until its plan uploads nothing and nothing waits.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int view = 0; view < 40; ++view) {
+    const Eigen::Vector3d eye = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized() * (1.5 + 3 * (u(rng) + 1));
+    const double focal = 400 * (u(rng) + 1.5);
+    for (int frames = 0;; ++frames) {
+      f = small.plan(all, decoded.data(), eye - origin, focal, UINT64_MAX);
+      if (f.uploads.empty() && f.waiting == 0) break;
+      ASSERT_LT(frames, 8) << "view " << view << " does not settle: " << f.waiting << " waiting";
+    }
+    EXPECT_LE(small.residentBytes(), small.capacityBytes());
+  }
+}
+
 }  // namespace sa
