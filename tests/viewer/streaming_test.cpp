@@ -237,9 +237,11 @@ TEST_F(StreamingTest, AGpuBudgetOfAQuarterOfTheAtlasDrawsTheSameScene) {
     }
     ASSERT_FALSE(rb.tilesPending()) << "view " << v << " did not settle";
     ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, true).isOk());
-    // Memory holds the levels on the GPU and their coarser ones only (at most a third more).
+    // Memory holds the levels the view plans (the plan keeps them within 70 % of the cache) and
+    // their coarser ones (a third more): within the budget, also where a planned level found no
+    // block and its cell is drawn coarser for now.
     EXPECT_GT(fr.stats.heldBytes, 0u);
-    EXPECT_LE(fr.stats.heldBytes, fr.stats.residentBytes * 4 / 3) << "view " << v;
+    EXPECT_LE(fr.stats.heldBytes, budget) << "view " << v;
     const RenderAgreement g = compareRenders(full.depth, fr.depth, texel);
     ASSERT_GT(g.both, 1000u);
     std::printf("view %d: %d frames to settle, %.1f of %.1f MiB resident, %.1f MiB held, %u cells coarser to fit; IoU %.4f (%zu pixels only unlimited, %zu only budget), depth error median %.3f texels, p95 %.3f\n",
