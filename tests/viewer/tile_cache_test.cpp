@@ -143,13 +143,25 @@ TEST(GpuBudgetDefault, OnlyWhereThePagesOutgrowTheMemory) {
   EXPECT_EQ(atlasBytes(p), p.pageTexels() * p.meta().pageCount * (2 + (p.hasNormals() ? kNormalBytes : 0) + (p.hasColor() ? 4 : 0)));
 }
 
-TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
+// The sphere's pack opened with every page, and all its cells as one visible set.
+struct SphereCells {
   test::TempDir d;
   PackReader p;
-  ASSERT_TRUE(p.open(packSphere(d)).isOk());
+  std::vector<uint32_t> all;
+  bool open() {
+    if (!p.open(packSphere(d)).isOk()) return false;
+    all.resize(p.cells().size());
+    for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+    return true;
+  }
+};
+
+TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
+  SphereCells sc;
+  ASSERT_TRUE(sc.open());
+  const PackReader& p = sc.p;
   const uint32_t n = uint32_t(p.cells().size());
-  std::vector<uint32_t> all(n);
-  for (uint32_t i = 0; i < n; ++i) all[i] = i;
+  const std::vector<uint32_t>& all = sc.all;
   std::vector<uint8_t> decoded(n, 0);  // every level in memory
   const Eigen::Vector3d eye(0, 0, 4);  // relative to the pack origin, which is near the centre
   // Near, with room for everything: every cell at level 0.
@@ -209,12 +221,11 @@ TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
 // camera the plan settles (no cell waits for a block) within a few frames, where a block at the
 // planned level cannot be found, at a coarser one.
 TEST(TileResidency, AViewThatDoesNotFitIsFinerWhereItFitsAndAlwaysSettles) {
-  test::TempDir d;
-  PackReader p;
-  ASSERT_TRUE(p.open(packSphere(d)).isOk());
+  SphereCells sc;
+  ASSERT_TRUE(sc.open());
+  const PackReader& p = sc.p;
   const uint32_t n = uint32_t(p.cells().size());
-  std::vector<uint32_t> all(n);
-  for (uint32_t i = 0; i < n; ++i) all[i] = i;
+  const std::vector<uint32_t>& all = sc.all;
   std::vector<uint8_t> decoded(n, 0);
   const Eigen::Vector3d origin(p.meta().origin);
   auto pow2 = [](uint32_t v) {
