@@ -36,7 +36,9 @@ const char* kHelp =
     "  relative to the bounding-box diagonal, normal angular error median, PSNR of the shaded\n"
     "  image (both shaded alike: Lambert, head light, no scan colour), interior holes (pixels\n"
     "  where the reference has surface on the pixel and its 8 neighbours and the render has\n"
-    "  none: pinholes and seams), and the frame time.\n"
+    "  none: pinholes and seams), and the frame time. --json also counts the pixels only the\n"
+    "  render covers (only_render: surplus, wider silhouettes) and only the reference covers\n"
+    "  (only_reference: holes, thin parts missed), which tell what an IoU below 1 is made of.\n"
     "\n"
     "  always (parallax): seam, the mean angle between the shading normals of neighbouring pixels\n"
     "  drawn by different cells over the same for pixels of one cell (on continuous surface; 1 =\n"
@@ -99,7 +101,7 @@ struct Row {
   double frameMs = 0;
   bool hasRef = false;
   double iou = 0, iouMin = 1, sil = 0, depthMed = 0, depthP95 = 0, normalMed = -1, psnr = 0;
-  size_t holes = 0;
+  size_t holes = 0, onlyRender = 0, onlyReference = 0;  // pixels covered by one image alone
   std::optional<FarStats> far;
   std::optional<SeamStats> seam;
   std::vector<ViewResult> views;
@@ -202,6 +204,8 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
       silSum += vr.ref->silhouetteError;
       row.iouMin = std::min(row.iouMin, vr.ref->iou);
       row.holes += vr.ref->interiorHoles;
+      row.onlyRender += vr.ref->onlyTest;
+      row.onlyReference += vr.ref->onlyRef;
       vr.ref->depthErrors.clear();
       vr.ref->normalErrors.clear();
     }
@@ -315,9 +319,11 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
                 r.frameMs);
     if (r.hasRef)
       std::printf(", \"iou\": %.6f, \"iou_min\": %.6f, \"silhouette_error\": %.6f, \"depth_median\": %.8g, "
-                  "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f, \"interior_holes\": %zu",
+                  "\"depth_p95\": %.8g, \"normal_median_deg\": %s, \"psnr\": %.4f, \"interior_holes\": %zu, "
+                  "\"only_render\": %zu, \"only_reference\": %zu",
                   r.iou, r.iouMin, r.sil, r.depthMed, r.depthP95,
-                  r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr, r.holes);
+                  r.normalMed < 0 ? "null" : std::to_string(r.normalMed).c_str(), r.psnr, r.holes, r.onlyRender,
+                  r.onlyReference);
     if (r.work.valid)
       std::printf(", \"work\": {\"unit\": \"%s\", \"rays\": %llu, \"mean\": %.3f, \"p50\": %u, \"p90\": %u, \"p99\": %u, "
                   "\"max\": %u, \"capped\": %llu}", r.mode == "parallax" ? "samples" : "nodes", (unsigned long long)r.work.rays,
@@ -328,10 +334,10 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
       std::printf("%s{\"view\": %zu, \"frame_ms\": %.4f", v ? ", " : "", v, vr.ms);
       if (vr.ref)
         std::printf(", \"iou\": %.6f, \"depth_median\": %.8g, \"depth_p95\": %.8g, \"normal_median_deg\": %s, "
-                    "\"interior_holes\": %zu",
+                    "\"interior_holes\": %zu, \"only_render\": %zu, \"only_reference\": %zu",
                     vr.ref->iou, vr.ref->depthMedian, vr.ref->depthP95,
                     vr.ref->normalMedianDeg < 0 ? "null" : std::to_string(vr.ref->normalMedianDeg).c_str(),
-                    vr.ref->interiorHoles);
+                    vr.ref->interiorHoles, vr.ref->onlyTest, vr.ref->onlyRef);
       std::printf(", \"far\": %s, \"seam\": %s}", farJson(vr.far).c_str(), seamJson(vr.seam).c_str());
     }
     std::printf("]}");

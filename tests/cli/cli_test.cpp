@@ -151,6 +151,20 @@ TEST(Cli, PackInfoBenchEvalJson) {
   EXPECT_TRUE(ej["configs"][1]["normal_median_deg"].is_null());  // points: no normals
   EXPECT_EQ(par["interior_holes"].get<int>(), 0);
   EXPECT_TRUE(par["far"].is_null());  // only with --far (or without a reference)
+  // Pixels covered by one image alone: the views' counts add up to the configuration's, interior
+  // holes are reference pixels the render lacks, and the points baseline differs most.
+  for (const auto& c : ej["configs"]) {
+    size_t render = 0, reference = 0;
+    for (const auto& v : c["per_view"]) {
+      render += v["only_render"].get<size_t>();
+      reference += v["only_reference"].get<size_t>();
+      EXPECT_LE(v["interior_holes"].get<size_t>(), v["only_reference"].get<size_t>()) << c.dump();
+    }
+    EXPECT_EQ(render, c["only_render"].get<size_t>());
+    EXPECT_EQ(reference, c["only_reference"].get<size_t>());
+  }
+  EXPECT_LT(par["only_render"].get<size_t>() + par["only_reference"].get<size_t>(),
+            ej["configs"][1]["only_render"].get<size_t>() + ej["configs"][1]["only_reference"].get<size_t>());
 
   // The reference in every mesh format pack reads: the same mesh as OBJ and as Draco gives the
   // same figures; --far adds the reference-free measure; without --reference it is the measure.
