@@ -79,7 +79,7 @@ const char* kHelp =
     "  --modes LIST           also bake what these surface-detail modes need (comma-separated):\n"
     "                         exact (min/max mipmaps, ~5.6 bytes a texel), vdm (view-dependent\n"
     "                         distances for the cells within its default 256M budget, and exact's),\n"
-    "                         gdm (voxel surfels of the forced cells from the sources, and exact's);\n"
+    "                         gdm (implicit surfaces of the forced cells from the sources, and exact's);\n"
     "                         parallax and points need nothing. Later, with a region or a budget:\n"
     "                         scanatlas bake OUT.hfa --mode vdm --clip-box ... | --budget SIZE\n"
     "  --raw-pages            store the atlas pages uncompressed (larger; mapped in place, no decoding\n"

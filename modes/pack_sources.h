@@ -1,5 +1,5 @@
 // The files a pack was made from (its NOTE), opened again: what the modes that read the raw data
-// (gdm's surfels, grooves' detection, the points baseline) start from.
+// (gdm's implicit surfaces, grooves' detection, the points baseline) start from.
 #pragma once
 #include <string>
 

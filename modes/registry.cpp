@@ -54,20 +54,26 @@ Result<ExtraSection> bakeGdm(const PackReader& pack, const BakeRequest& req, std
   ExtraSection s = gdm::makeSection(pack, *grids, seconds);
   uint64_t voxels = 0;
   size_t built = 0, functions = 0, rankSum = 0;
-  double worstP95 = 0;
+  double worstP95 = 0, kernelMin = 1e300, kernelMax = 0;
   for (const gdm::CellGrid& g : *grids) {
-    voxels += g.voxels.size();
+    if (g.nx > 0 && g.kernel > 0) {
+      kernelMin = std::min(kernelMin, g.kernel);
+      kernelMax = std::max(kernelMax, g.kernel);
+    }
+    voxels += g.voxelCount();
     built += g.nx > 0;
     functions += g.fn.rank > 0;
     rankSum += size_t(g.fn.rank);
     worstP95 = std::max(worstP95, g.fn.p95);
   }
-  char line[400];
+  char kernel[96] = "";
+  if (kernelMax > 0) std::snprintf(kernel, sizeof(kernel), ", surface kernel %.2f-%.2f sample spacings", kernelMin, kernelMax);
+  char line[512];
   std::snprintf(line, sizeof(line),
                 "gdm: section GDMV, %.1f MiB, %zu forced cells (%zu built, %zu with a direction function: mean rank %.1f, "
-                "p95 error up to %.2f voxels), %llu voxels, in %.1f s",
+                "p95 error up to %.2f voxels), %llu voxels%s, in %.1f s",
                 double(s.bytes.size()) / (1 << 20), grids->size(), built, functions,
-                functions ? double(rankSum) / double(functions) : 0.0, worstP95, (unsigned long long)voxels, seconds);
+                functions ? double(rankSum) / double(functions) : 0.0, worstP95, (unsigned long long)voxels, kernel, seconds);
   summary = line;
   return s;
 }
@@ -83,13 +89,14 @@ const ModeInfo kModes[] = {
      "verify -> exact traversal; bakes VDMF for the cells in --clip-box or up to --budget (default 256M), and XMAX",
      vdm::kSectionId, bakeVdm, RenderMode::kExact, "exact", "vdm.glsl"},
     {RenderMode::kGdm, "gdm",
-     "forced cells (not height fields: overhangs, thin parts) drawn from voxel surfels of their source points or triangles "
-     "by a 3-D DDA from any face or from inside, guided by the SVD-compressed distance function (Wang et al. 2004); "
+     "forced cells (not height fields: overhangs, thin parts) drawn from the implicit surface of their source points or "
+     "triangles (signed distances at voxel corners) by a 3-D DDA from any face or from inside, guided by the "
+     "SVD-compressed distance function (Wang et al. 2004); "
      "bakes GDMV (reads the pack's sources) and XMAX; other cells draw exact",
      gdm::kSectionId, bakeGdm, RenderMode::kExact, "exact", "gdm.glsl"},
     {RenderMode::kSlices, "slices",
      "volumetric texture slices (Meyer & Neyret 1998): --slices N quads per cell across the axis nearest the view, "
-     "opaque under the height field (forced cells: where gdm's voxels hold a surfel, when baked); needs nothing baked",
+     "opaque under the height field (forced cells: inside gdm's implicit surface, when baked); needs nothing baked",
      nullptr, nullptr, RenderMode::kSlices, nullptr, nullptr, "slices_vs.glsl", "slices_fs.glsl"},
     {RenderMode::kAuto, "auto",
      "level of detail: per cell the parallax march where its box covers --auto-pixels pixels or more (default 8), "

@@ -1,10 +1,11 @@
 // The `gdm` mode's cast (modes/gdm/gdm.cpp `traceGuided` is the same rule on the CPU): a cell
 // with a voxel grid (a forced cell) looks up its generalized displacement function where the ray
 // enters the box - any face, or the camera inside - and walks voxels (Amanatides & Woo) from the
-// predicted point, or from the entry where the prediction fails a check; the first voxel whose
-// surfel plane the ray meets within the voxel is the hit; its normal shades. A ray that passes no occupied voxel
-// at all (samples too sparse for surfels: scan edges, cracks the pack's pull-push closed) takes
-// the cell's height field instead. Other cells: the exact traversal.
+// predicted point, or from the entry where the prediction fails a check; the first crossing of the
+// cell's implicit surface from outside to inside is the hit, its gradient the normal
+// (gdm_voxels.glsl). A ray that passes no known voxel at all (samples too sparse for the band to
+// reach: scan edges, cracks the pack's pull-push closed) takes the cell's height field instead.
+// Other cells: the exact traversal.
 #define EXACT_NO_CAST 1
 #include "exact.glsl"
 
@@ -54,7 +55,7 @@ bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tH
     if (skip < unit / len) break;
     float tn = min(t + skip, t1);
     ivec3 b = clamp(ivec3(floor((o + d * (tn - 0.5 * unit / len) - lo) / vs)), ivec3(0), N - 1);
-    if (gdmWord[blk + 8u + uint((b.z * N.y + b.y) * N.x + b.x)] != 0u) {
+    if (gdmState(blk, N, b) != 0u) {
       failed = true;
       break;
     }
@@ -78,7 +79,7 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     castHasNormal = true;
     return true;
   }
-  if (touched) return false;  // it passed surfels and met none: nothing there
+  if (touched) return false;  // it passed near the samples and met no surface: nothing there
   uint nodes;
   bool found = exactTrace(c, cell, o, d, tEnter, tExit, tHit, nodes);
   work += nodes;
@@ -89,7 +90,7 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   uint blk = gdmEntry[cell];
   if (blk == 0xffffffffu) return exactShadowRay(c, cell, p, l);
   vec3 vs = vec3(uintBitsToFloat(gdmWord[blk + 3u]), uintBitsToFloat(gdmWord[blk + 4u]), uintBitsToFloat(gdmWord[blk + 5u]));
-  float start = 0.75 * length(vs);  // off the hit's own surfel
+  float start = 0.75 * length(vs);  // off the hit's own surface
   vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
   vec3 t1 = max((bmin - p) / l, (bmax - p) / l);
   float tExit = min(min(t1.x, t1.y), t1.z);

@@ -1,18 +1,23 @@
 // The `gdm` mode's core (MODES.md §2; Wang et al., "Generalized Displacement Maps", 2004), for the
 // cells that are not height fields (forced cells: overhangs, thin parts, layers), GL-free.
 //
-// What is built: per forced cell a voxel grid over its box (the cell's texel in u and v, the
-// smaller of the two in w) whose occupied voxels each hold a surfel - the plane of the cell's
-// SOURCE samples near the voxel (points: every voxel within 0.75 sample spacings of a point;
-// triangles: samples half a voxel apart), never its height map - and the 3-D DDA
-// (Amanatides & Woo) that finds the first surfel along a ray entering through any face or
-// starting inside the box. On top of the grid, the generalized displacement function (000 §3.1):
-// for every voxel centre and 16 x 32 directions over the full sphere, the distance to the first
-// occupied voxel (a lower bound over the bin's neighbours and the voxel's face neighbours),
-// SVD-compressed (000 §4.1) with the rank chosen by its error; a ray that crosses many voxels
-// jumps by it a few times, each jump checked against the occupancy half a voxel before it lands,
-// and walks the DDA from there.
+// What is built: per forced cell a grid over its box (the cell's texel in u and v, the smaller of
+// the two in w) holding, at the voxels' corners, a signed distance to the surface of the cell's
+// SOURCE samples, never its height map: the implicit moving-least-squares surface of the oriented
+// samples (Kolluri 2008; Hoppe et al. 1992), f(x) = sum_i w_i (x - p_i) . n_i / sum_i w_i with
+// Gaussian weights one sample spacing wide, negative inside. Corners farther than a band of about
+// two spacings from every sample are unknown (nothing is invented far from the data). The surface
+// is where the trilinear interpolation of the corners is zero: continuous from voxel to voxel,
+// both sides of thin parts apart (their normals face away from each other), the noise of merged
+// scans averaged out. The 3-D DDA (Amanatides & Woo) finds the first crossing along a ray entering
+// through any face or starting inside the box. On top of the grid,
+// the generalized displacement function (000 §3.1): for every voxel centre and 16 x 32 directions
+// over the full sphere, the distance to the first voxel the surface may pass (a lower bound over
+// the bin's neighbours and the voxel's face neighbours), SVD-compressed (000 §4.1) with the rank
+// chosen by its error; a ray that crosses many voxels jumps by it a few times, each jump checked
+// against the voxels half a voxel before it lands, and walks the DDA from there.
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -24,9 +29,6 @@
 
 namespace sa::gdm {
 
-// One voxel: 0 = empty; else bits 0-15 the surfel normal (octahedral, 8 + 8 bits, frame
-// coordinates), bits 16-31 the plane's offset from the voxel centre along that normal, a signed
-// 16-bit fraction of half the voxel diagonal.
 // The generalized displacement function of a grid, compressed: M[row][col] ~ sum_k u[row][k]
 // v[col][k], row = (y nx + x) kPhiBins + phi bin, col = z kThetaBins + theta bin; a value is the
 // distance from the voxel centre along the bin's central direction to where the ray enters the
@@ -40,30 +42,49 @@ struct Function {
   double p95 = 0, p99 = 0;  // reconstruction error over every entry (voxel units)
 };
 
+// A corner's signed distance in units of CellGrid::unit(); kUnknown: no sample near it.
+inline constexpr int16_t kUnknown = -32768;
+// A voxel's state: a corner unknown; all eight known and positive (no surface can pass); all
+// known and one on or under zero (the surface passes, or the voxel is inside: "occupied").
+enum : uint8_t { kVoxelUnknown = 0, kVoxelOutside = 1, kVoxelOccupied = 3 };
+
 struct CellGrid {
   uint32_t cell = 0;
   int nx = 0, ny = 0, nz = 0;
-  double vx = 0, vy = 0, vz = 0;  // voxel sizes (frame units)
-  std::vector<uint32_t> voxels;   // x fastest, then y, then z
+  double vx = 0, vy = 0, vz = 0;   // voxel sizes (frame units)
+  std::vector<int16_t> corners;    // (nx + 1)(ny + 1)(nz + 1), x fastest, then y, then z
+  std::vector<uint8_t> state;      // per voxel, x fastest, then y, then z
   Function fn;
-  uint32_t at(int x, int y, int z) const { return voxels[(size_t(z) * ny + y) * nx + x]; }
+  double kernel = 0;  // the bake's kernel width in sample spacings (0: from triangles); not stored
+  double unit() const { return std::min(vx, std::min(vy, vz)) / 1024; }  // of the corner values
+  size_t voxelCount() const { return size_t(nx) * ny * nz; }
+  size_t cornerIndex(int x, int y, int z) const { return (size_t(z) * (ny + 1) + y) * (nx + 1) + x; }
+  uint8_t at(int x, int y, int z) const { return state[(size_t(z) * ny + y) * nx + x]; }
+  bool occupied(int x, int y, int z) const { return at(x, y, z) == kVoxelOccupied; }
 };
 
-uint32_t encodeVoxel(const Eigen::Vector3d& normal, double offset, const Eigen::Vector3d& voxelSize);
-void decodeVoxel(uint32_t v, const Eigen::Vector3d& voxelSize, Eigen::Vector3d& normal, double& offset);
+// A signed distance (frame units) as a corner value of g (clamped to 32 voxels either way).
+int16_t quantizeCorner(const CellGrid& g, double f);
+// Sets g.state from g.corners.
+void finishStates(CellGrid& g);
 
 // Source samples of one cell, in its frame: positions, and normals where known (zero: unknown).
 struct Samples {
   std::vector<Eigen::Vector3d> p, n;
 };
 
-// Builds a cell's grid from its samples; spacing: the sample spacing (points: each sample
-// reaches the voxels within 0.75 of it; 0 for triangle samples, which reach their own voxel).
+// Builds a cell's grid from its samples (those without a normal are left out); spacing: the
+// sample spacing of points, 0 for samples taken densely from triangles. The kernel is a spacing
+// wide, widened (up to kMaxKernel) where the samples' noise about the field is large, until the
+// field keeps kFieldNoise spacings of it (CellGrid::kernel says how wide).
+inline constexpr double kFieldNoise = 0.03, kMaxKernel = 3;
 CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double spacing);
 
-// First surfel along o + t d (frame), t in [t0, t1]; normal (frame, facing the ray's origin);
-// touched: whether the ray passed an occupied voxel (the shader draws the cell's height field
-// where it passed none).
+// First crossing of the surface along o + t d (frame), t in [t0, t1], either way (a camera inside a
+// thin part sees its walls); normal (frame, the field's gradient turned to face the ray's origin);
+// touched: whether the ray
+// passed a known voxel, one near the samples (the shader draws the cell's height field where it
+// passed none: the samples were too sparse there for the band to reach).
 bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
            double& tHit, Eigen::Vector3d* normal = nullptr, uint32_t* steps = nullptr, bool* touched = nullptr);
 
@@ -90,17 +111,23 @@ inline constexpr int kDirectVoxels = 12, kMaxJumps = 4;
 bool traceGuided(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0,
                  double t1, double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched, Guided* how = nullptr);
 
-// Reads the pack's sources (NOTE) and builds every forced cell's grid and its function.
+// Reads the pack's sources (NOTE) and builds every forced cell's grid and its function. Points
+// without normals in their files get the pack's own estimate (preprocess fitSurface: outliers
+// left out, normals toward the scanner of a scan set or away from the centre, not smoothed).
 // progress(done, total).
 Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack,
                                                const std::function<void(uint64_t, uint64_t)>& progress = nullptr);
 
 // The pack section `GDMV` (docs/FORMAT.md).
 inline constexpr char kSectionId[4] = {'G', 'D', 'M', 'V'};
-inline constexpr uint32_t kSectionVersion = 2;  // 1: voxels only
+inline constexpr uint32_t kSectionVersion = 3;  // 1: surfels only; 2: surfels and the function
 inline constexpr uint32_t kNoEntry = 0xffffffffu;
-// nx, ny, nz, vx, vy, vz (f32 bits), the function's rank, the first word of its u (from the block's start)
+// nx, ny, nz, vx, vy, vz (f32 bits), the function's rank, the first word of its u (from the block's
+// start); then the voxel states (2 bits each, 16 to a word, low bits first), then the corners (16
+// bits each, two to a word, low half first), then the function.
 inline constexpr int kBlockHeaderWords = 8;
+inline uint64_t stateWords(uint64_t voxels) { return (voxels + 15) / 16; }
+inline uint64_t cornerWords(uint64_t corners) { return (corners + 1) / 2; }
 struct SectionHeader {
   uint32_t version, cellCount, gridCells, zero0;
   double bakeSeconds;

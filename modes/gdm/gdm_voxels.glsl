@@ -1,29 +1,50 @@
-// The gdm mode's voxel grids on the GPU (GDMV, docs/FORMAT.md): the buffers, a voxel's surfel and
-// the DDA that finds the first surfel along a ray (gdm.cpp walk). Shared by gdm.glsl and the
-// slices mode (forced cells' slices are opaque where this walk meets a surfel).
+// The gdm mode's voxel grids on the GPU (GDMV, docs/FORMAT.md): the buffers, a voxel's field and
+// the DDA that finds the first crossing of the surface along a ray (gdm.cpp walk). Shared by
+// gdm.glsl and the slices mode (forced cells' slices are opaque where this walk meets the surface).
+// The surface is the zero set of the trilinear interpolation of a signed distance stored at the
+// voxels' corners (the implicit moving-least-squares surface of the cell's source samples,
+// Kolluri 2008), negative inside; a hit is where the ray crosses it, either way (a camera inside a
+// thin part sees its walls), shaded with the side that faces the ray.
 layout(std430, binding = 6) readonly buffer GdmEntries { uint gdmEntry[]; };  // block of each cell, ~0u: none
 layout(std430, binding = 7) readonly buffer GdmWords { uint gdmWord[]; };
 
-vec3 gdmNormal(uint v, vec3 vs, out float offset) {
-  vec2 p = vec2(float(v & 255u), float((v >> 8) & 255u)) / 127.5 - 1.0;
-  float z = 1.0 - abs(p.x) - abs(p.y);
-  vec2 xy = z < 0.0 ? (1.0 - abs(p.yx)) * vec2(p.x < 0.0 ? -1.0 : 1.0, p.y < 0.0 ? -1.0 : 1.0) : p;
-  int q = int(v >> 16);
-  if (q >= 32768) q -= 65536;
-  offset = float(q) / 32767.0 * 0.5 * length(vs);
-  return normalize(vec3(xy, z));
+// 0: a corner unknown (no sample near), 1: known and outside, 3: the surface may pass (gdm.h).
+uint gdmState(uint blk, ivec3 N, ivec3 idx) {
+  uint i = uint((idx.z * N.y + idx.y) * N.x + idx.x);
+  return (gdmWord[blk + 8u + (i >> 4u)] >> ((i & 15u) * 2u)) & 3u;
 }
 
-// The DDA from t0 to t1 (gdm.cpp walk): a surfel hit counts from tAccept on (in the first voxel
-// from where the ray entered it). touched: the ray passed an occupied voxel (whether or not it
-// met the surfel).
+// A corner's value (in the grid's units: only signs and ratios matter here).
+float gdmCorner(uint cornerBase, ivec3 N, int x, int y, int z) {
+  uint i = uint((z * (N.y + 1) + y) * (N.x + 1) + x);
+  uint w = gdmWord[cornerBase + (i >> 1u)];
+  return float((i & 1u) == 0u ? int(w << 16u) >> 16 : int(w) >> 16);
+}
+
+float gdmTrilinear(float f[8], vec3 s) {
+  vec4 x = mix(vec4(f[0], f[2], f[4], f[6]), vec4(f[1], f[3], f[5], f[7]), s.x);
+  vec2 y = mix(x.xz, x.yw, s.y);
+  return mix(y.x, y.y, s.z);
+}
+
+vec3 gdmGradient(float f[8], vec3 s, vec3 vs) {
+  float gx = mix(mix(f[1] - f[0], f[3] - f[2], s.y), mix(f[5] - f[4], f[7] - f[6], s.y), s.z);
+  float gy = mix(mix(f[2] - f[0], f[3] - f[1], s.x), mix(f[6] - f[4], f[7] - f[5], s.x), s.z);
+  float gz = mix(mix(f[4] - f[0], f[5] - f[1], s.x), mix(f[6] - f[2], f[7] - f[3], s.x), s.y);
+  return vec3(gx, gy, gz) / vs;
+}
+
+// The DDA from t0 to t1 (gdm.cpp walk): a crossing counts from tAccept on (in the first voxel
+// from where the ray entered it); within a voxel, 4 even steps find the first interval whose ends
+// differ in sign, then 10 bisections and a secant step (gdm.cpp crossing). touched: the
+// ray passed a known voxel (whether or not it met the surface).
 bool gdmWalk(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, float tAccept, out float tHit, out vec3 nHit,
              out uint steps, inout bool touched) {
   tHit = 0.0;
   nHit = vec3(0.0, 0.0, 1.0);
   ivec3 N = ivec3(gdmWord[blk], gdmWord[blk + 1u], gdmWord[blk + 2u]);
   vec3 vs = vec3(uintBitsToFloat(gdmWord[blk + 3u]), uintBitsToFloat(gdmWord[blk + 4u]), uintBitsToFloat(gdmWord[blk + 5u]));
-  uint base = blk + 8u;
+  uint cornerBase = blk + 8u + (uint(N.x * N.y * N.z) + 15u) / 16u;
   vec3 lo = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x);
   vec3 p = o + d * t0 - lo;
   ivec3 idx = clamp(ivec3(floor(p / vs)), ivec3(0), N - 1);
@@ -35,7 +56,6 @@ bool gdmWalk(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, float tAccept
     tMax[k] = d[k] != 0.0 ? t0 + ((float(idx[k]) + (stp[k] > 0 ? 1.0 : 0.0)) * vs[k] - p[k]) / d[k] : 3.4e38;
     if (d[k] != 0.0) entry = max(entry, tMax[k] - tDelta[k]);
   }
-  float margin = 0.25 * min(min(vs.x, vs.y), vs.z);
   float t = max(min(entry, t0), tAccept);
   int cap = N.x + N.y + N.z + 4;
   steps = 0u;
@@ -43,20 +63,28 @@ bool gdmWalk(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, float tAccept
     steps = uint(n + 1);
     int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
     float tNext = min(max(tMax[a], t), t1);
-    uint v = gdmWord[base + uint((idx.z * N.y + idx.y) * N.x + idx.x)];
-    if (v != 0u) {
-      touched = true;
-      float off;
-      vec3 nn = gdmNormal(v, vs, off);
-      vec3 centre = lo + (vec3(idx) + 0.5) * vs;
-      float den = dot(d, nn);
-      if (abs(den) > 1e-12) {
-        float tp = (off - dot(o - centre, nn)) / den;
-        if (tp >= t - margin && tp <= tNext + margin && tp >= tAccept && tp <= t1) {
-          tHit = tp;
-          nHit = den > 0.0 ? -nn : nn;
+    uint st = gdmState(blk, N, idx);
+    if (st != 0u) touched = true;
+    if (st == 3u) {
+      float f[8];
+      for (int k = 0; k < 8; ++k) f[k] = gdmCorner(cornerBase, N, idx.x + (k & 1), idx.y + ((k >> 1) & 1), idx.z + (k >> 2));
+      vec3 vlo = lo + vec3(idx) * vs;
+      float ta = t, fa = gdmTrilinear(f, (o + d * ta - vlo) / vs);
+      for (int i = 1; i <= 4; ++i) {
+        float tb = t + (tNext - t) * float(i) / 4.0;
+        float fb = gdmTrilinear(f, (o + d * tb - vlo) / vs);
+        if ((fa > 0.0) != (fb > 0.0)) {
+          for (int k = 0; k < 10; ++k) {
+            float tm = 0.5 * (ta + tb), fm = gdmTrilinear(f, (o + d * tm - vlo) / vs);
+            if ((fm > 0.0) == (fa > 0.0)) { ta = tm; fa = fm; } else { tb = tm; fb = fm; }
+          }
+          tHit = ta + (tb - ta) * fa / (fa - fb);
+          vec3 g = gdmGradient(f, (o + d * tHit - vlo) / vs, vs);
+          nHit = dot(g, g) > 0.0 ? normalize(g) * (dot(g, d) > 0.0 ? -1.0 : 1.0) : -normalize(d);
           return true;
         }
+        ta = tb;
+        fa = fb;
       }
     }
     if (tNext >= t1) return false;
@@ -67,4 +95,3 @@ bool gdmWalk(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, float tAccept
   }
   return false;
 }
-

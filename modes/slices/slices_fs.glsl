@@ -48,8 +48,8 @@ void main() {
   vec3 nWorld;
   uint blk = forcedVoxels ? gdmEntry[vCell] : 0xffffffffu;
   if (blk != 0xffffffffu) {
-    // A forced cell with voxels from its source points (gdm's bake): opaque where the ray met
-    // a surfel since the slab began; that surfel's normal shades.
+    // A forced cell with voxels from its source points (gdm's bake): opaque where the ray crossed
+    // into the surface since the slab began; the surface's normal there shades.
     float tHit;
     vec3 nFrame;
     uint steps;

@@ -67,7 +67,7 @@ void castRays(const CellRecord& c, const gdm::CellGrid& g, int count, std::mt199
     t.lookups += how != gdm::Guided::kNone;
     const double voxel = std::min({g.vx, g.vy, g.vz});
     // Same answer: the same hit within a hundredth of a voxel, or a miss both ways that passed
-    // surfels or not alike (the shader draws the height field where none was passed).
+    // known voxels or not alike (the shader draws the height field where none was passed).
     t.agree += hw == hg && (hw ? std::abs(tw - tg) <= 0.01 * voxel : touchedW == touchedG);
   }
 }
@@ -86,17 +86,18 @@ TEST(GdmFunction, LargeSyntheticCellWalksLessAndAgrees) {
   g.nx = g.ny = 40;
   g.nz = 20;
   g.vx = g.vy = g.vz = 1;
-  g.voxels.assign(size_t(40) * 40 * 20, 0);
-  const Eigen::Vector3d C(26, 16, 10), vs(1, 1, 1), plateN = Eigen::Vector3d(-0.2, 0.1, 1).normalized();
-  for (int z = 0; z < 20; ++z)
-    for (int y = 0; y < 40; ++y)
-      for (int x = 0; x < 40; ++x) {
-        const Eigen::Vector3d p(x + 0.5, y + 0.5, z + 0.5);
-        const double r = (p - C).norm(), plate = plateN.dot(p - Eigen::Vector3d(0, 0, 5));
-        uint32_t& v = g.voxels[(size_t(z) * 40 + y) * 40 + x];
-        if (std::abs(r - 7) < 0.75) v = gdm::encodeVoxel((p - C).normalized(), 7 - r, vs);
-        else if (std::abs(plate) < 0.75) v = gdm::encodeVoxel(plateN, -plate, vs);
+  // The signed distance to a shell 1.5 voxels thick and a plate as thick, known within 2.5 voxels.
+  g.corners.assign(size_t(41) * 41 * 21, gdm::kUnknown);
+  const Eigen::Vector3d C(26, 16, 10), plateN = Eigen::Vector3d(-0.2, 0.1, 1).normalized();
+  for (int z = 0; z <= 20; ++z)
+    for (int y = 0; y <= 40; ++y)
+      for (int x = 0; x <= 40; ++x) {
+        const Eigen::Vector3d p(x, y, z);
+        const double shell = std::abs((p - C).norm() - 7) - 0.75, plate = std::abs(plateN.dot(p - Eigen::Vector3d(0, 0, 5))) - 0.75;
+        const double f = std::min(shell, plate);
+        if (f < 2.5) g.corners[g.cornerIndex(x, y, z)] = gdm::quantizeCorner(g, f);
       }
+  gdm::finishStates(g);
   gdm::bakeFunction(g);
   ASSERT_GT(g.fn.rank, 0);
   std::mt19937 rng(9);
