@@ -1,5 +1,5 @@
 // The vdm mode's bake and lookup on the CPU (modes/vdm/vdm.h), the shader's interpolation
-// mirrored: 20 cells of the bunny's raw scans x 1000 random off-grid queries (x, y, theta, phi)
+// mirrored: 20 cells of the bunny's raw scans x 20000 random off-grid queries (x, y, theta, phi)
 // each, against the exact traversal from the same top-face point, and against the depth-only toy
 // in the same run (one height fetch, d = (w_top - h) / cos theta).
 #include <gtest/gtest.h>
@@ -47,7 +47,7 @@ TEST(Vdm, OffGridLookupsAgainstTheExactTraversalAndTheDepthOnlyToy) {
     texels += double(c.tileW) * c.tileH;
     bakeS += fn.bakeSeconds;
     rankSum += fn.rank;
-    for (int q = 0; q < 1000; ++q) {
+    for (int q = 0; q < 20000; ++q) {  // the count
       const double u = c.box[0] + u01(rng) * (c.box[1] - c.box[0]), v = c.box[2] + u01(rng) * (c.box[3] - c.box[2]);
       const double theta = u01(rng) * vdm::kMaxThetaDeg * M_PI / 180, phi = u01(rng) * 2 * M_PI;
       const Eigen::Vector3d d = vdm::direction(theta, phi), o(u, v, c.box[5]);
