@@ -48,7 +48,9 @@ Result<ExtraSection> bakeVdm(const PackReader& pack, const BakeRequest& req, std
 
 Result<ExtraSection> bakeGdm(const PackReader& pack, const BakeRequest& req, std::string& summary) {
   const auto t0 = std::chrono::steady_clock::now();
-  auto grids = gdm::buildForcedGrids(pack, req.progress);
+  gdm::FunctionReport fr;
+  const uint64_t budget = req.budget ? req.budget : gdm::kDefaultFunctionBudget;
+  auto grids = gdm::buildForcedGrids(pack, budget, &fr, req.progress);
   if (!grids.isOk()) return grids.status();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ExtraSection s = gdm::makeSection(pack, *grids, seconds);
@@ -68,12 +70,16 @@ Result<ExtraSection> bakeGdm(const PackReader& pack, const BakeRequest& req, std
   }
   char kernel[96] = "";
   if (kernelMax > 0) std::snprintf(kernel, sizeof(kernel), ", surface kernel %.2f-%.2f sample spacings", kernelMin, kernelMax);
-  char line[512];
+  char over[96] = "";
+  if (fr.overBudget) std::snprintf(over, sizeof(over), ", %u more left out by the budget", fr.overBudget);
+  char line[768];
   std::snprintf(line, sizeof(line),
-                "gdm: section GDMV, %.1f MiB, %zu forced cells (%zu built, %zu with a direction function: mean rank %.1f, "
-                "p95 error up to %.2f voxels), %llu voxels%s, in %.1f s",
-                double(s.bytes.size()) / (1 << 20), grids->size(), built, functions,
-                functions ? double(rankSum) / double(functions) : 0.0, worstP95, (unsigned long long)voxels, kernel, seconds);
+                "gdm: section GDMV, %.1f MiB, %zu forced cells (%zu built, %zu with a direction function where rays skip "
+                "%.0f voxels or more: %.1f MiB of the %.0f MiB budget%s, mean rank %.1f, p95 error up to %.2f voxels), "
+                "%llu voxels%s, in %.1f s",
+                double(s.bytes.size()) / (1 << 20), grids->size(), built, functions, gdm::kWorthAFunction,
+                double(fr.bytes) / (1 << 20), double(budget) / (1 << 20), over, functions ? double(rankSum) / double(functions) : 0.0,
+                worstP95, (unsigned long long)voxels, kernel, seconds);
   summary = line;
   return s;
 }

@@ -93,8 +93,12 @@ bool trace(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, con
 std::vector<float> sampleFunction(const CellGrid& g);
 // Computes g.fn: the rank-k truncated SVD of sampleFunction(g), the smallest k <= kMaxRank whose
 // p95 error is at most maxError voxels (else kMaxRank); none when the grid is larger than the
-// bake allows (more than maxEntries values, or more than 2048 columns).
+// bake allows (more than maxEntries values, or more than 2048 columns) or too small for any ray
+// to cross kDirectVoxels voxels (nx + ny + nz below it: the function would never be read).
 void bakeFunction(CellGrid& g, double maxError = 0.5, uint64_t maxEntries = uint64_t(1) << 25);
+// How many voxels random rays through the box (any direction) cross before the first known
+// voxel, on average: what the function could let them skip.
+double skippableVoxels(const CellRecord& c, const CellGrid& g, int rays = 64);
 // The function at voxel (x, y, z) for direction d (frame, any length): the nearest bin's value.
 double lookup(const CellGrid& g, int x, int y, int z, const Eigen::Vector3d& d);
 
@@ -104,6 +108,7 @@ double lookup(const CellGrid& g, int x, int y, int z, const Eigen::Vector3d& d);
 // ray was).
 enum class Guided { kNone, kHit, kMiss, kFallback };
 inline constexpr int kDirectVoxels = 12, kMaxJumps = 4;
+inline constexpr double kWorthAFunction = 6;  // voxels a ray would skip, on average (buildForcedGrids)
 // The shader's cast in double: with a function and a long enough ray, up to kMaxJumps lookups,
 // each jumping from the voxel the ray has reached by the function's value less half a voxel,
 // each taken only where the voxel half a voxel before its landing point is empty; then the DDA
@@ -111,11 +116,27 @@ inline constexpr int kDirectVoxels = 12, kMaxJumps = 4;
 bool traceGuided(const CellRecord& c, const CellGrid& g, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0,
                  double t1, double& tHit, Eigen::Vector3d* normal, uint32_t* steps, bool* touched, Guided* how = nullptr);
 
-// Reads the pack's sources (NOTE) and builds every forced cell's grid and its function. Points
-// without normals in their files get the pack's own estimate (preprocess fitSurface: outliers
-// left out, normals toward the scanner of a scan set or away from the centre, not smoothed).
-// progress(done, total).
-Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack,
+// Reads the pack's sources (NOTE) and builds every forced cell's grid. Points without normals in
+// their files get the pack's own estimate (preprocess fitSurface: outliers left out, normals
+// toward the scanner of a scan set or away from the centre, not smoothed). Then the direction
+// functions, where random rays would skip kWorthAFunction voxels or more on average
+// (skippableVoxels), most skipped first, while their bytes fit functionBudget. progress(done,
+// total).
+struct FunctionReport {
+  uint32_t candidates = 0, baked = 0, overBudget = 0;
+  uint64_t bytes = 0;
+};
+inline constexpr uint64_t kDefaultFunctionBudget = uint64_t(32) << 20;
+// The bytes of a grid's function in the section.
+uint64_t functionBytes(const CellGrid& g);
+// Bakes the functions of the grids whose rays would skip (skip[k], skippableVoxels) at least
+// kWorthAFunction voxels, most skipped first, in batches of 16; a function is kept while the
+// functions' bytes stay within budget, the others get none; after a batch that kept none the rest
+// are left out unbaked. tick (may be empty): once per grid.
+void bakeFunctions(std::vector<CellGrid>& grids, const std::vector<double>& skip, uint64_t budget, FunctionReport* report,
+                   const std::function<void()>& tick = nullptr);
+Result<std::vector<CellGrid>> buildForcedGrids(const PackReader& pack, uint64_t functionBudget = kDefaultFunctionBudget,
+                                               FunctionReport* report = nullptr,
                                                const std::function<void(uint64_t, uint64_t)>& progress = nullptr);
 
 // The pack section `GDMV` (docs/FORMAT.md).

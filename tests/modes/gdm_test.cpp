@@ -73,10 +73,9 @@ void castRays(const CellRecord& c, const gdm::CellGrid& g, int count, std::mt199
 }
 
 // A 40 x 40 x 20 grid of unit voxels holding a thin spherical shell and a slanted plate, the
-// kind of cell the function is for (long rays over empty space): the guided trace must agree
-// with the walk and walk fewer voxels.
-TEST(GdmFunction, LargeSyntheticCellWalksLessAndAgrees) {
-  CellRecord c{};
+// kind of cell the function is for (long rays over empty space).
+gdm::CellGrid shellAndPlate(CellRecord& c) {
+  c = CellRecord{};
   c.u[0] = c.v[1] = c.w[2] = 1;
   c.tileW = 40;
   c.tileH = 40;
@@ -98,6 +97,13 @@ TEST(GdmFunction, LargeSyntheticCellWalksLessAndAgrees) {
         if (f < 2.5) g.corners[g.cornerIndex(x, y, z)] = gdm::quantizeCorner(g, f);
       }
   gdm::finishStates(g);
+  return g;
+}
+
+// The guided trace must agree with the walk and walk fewer voxels.
+TEST(GdmFunction, LargeSyntheticCellWalksLessAndAgrees) {
+  CellRecord c;
+  gdm::CellGrid g = shellAndPlate(c);
   gdm::bakeFunction(g);
   ASSERT_GT(g.fn.rank, 0);
   std::mt19937 rng(9);
@@ -109,6 +115,33 @@ TEST(GdmFunction, LargeSyntheticCellWalksLessAndAgrees) {
   EXPECT_LE(t.fallbacks, t.lookups / 5);
   EXPECT_GE(double(t.agree), 0.99 * double(t.rays));
   EXPECT_LT(double(t.stepsGuided), 0.7 * double(t.stepsWalk));
+}
+
+// Functions go where rays skip most, within the budget, whatever the order of the grids; grids
+// whose rays skip too little get none.
+TEST(GdmFunction, BudgetTakesTheCellsThatSkipMostFirst) {
+  CellRecord c;
+  const gdm::CellGrid g = shellAndPlate(c);
+  const double skip = gdm::skippableVoxels(c, g);
+  std::printf("[gdm-fn] shell and plate: rays skip %.1f voxels on average\n", skip);
+  EXPECT_GE(skip, gdm::kWorthAFunction);
+  gdm::CellGrid one = g;
+  gdm::bakeFunction(one);
+  const uint64_t each = gdm::functionBytes(one);
+  ASSERT_GT(each, 0u);
+  // Six copies, skipping (in this order) 7, 3, 9, 20, 8, 10 voxels; room for three functions.
+  std::vector<gdm::CellGrid> grids(6, g);
+  const std::vector<double> skips = {7, 3, 9, 20, 8, 10};
+  gdm::FunctionReport rep;
+  size_t ticks = 0;
+  gdm::bakeFunctions(grids, skips, 3 * each + each / 2, &rep, [&] { ++ticks; });
+  EXPECT_EQ(ticks, grids.size());
+  EXPECT_EQ(rep.candidates, 5u);
+  EXPECT_EQ(rep.baked, 3u);
+  EXPECT_EQ(rep.overBudget, 2u);
+  EXPECT_LE(rep.bytes, 3 * each + each / 2);
+  const bool expected[6] = {false, false, true, true, false, true};  // 20, 10, then 9
+  for (size_t k = 0; k < grids.size(); ++k) EXPECT_EQ(grids[k].fn.rank > 0, expected[k]) << k;
 }
 
 struct GdmCase {
@@ -125,8 +158,15 @@ TEST_P(GdmFunctionOnPacks, GuidedTraceAgreesWithTheWholeWalk) {
   PackReader pack;
   const Status packed = test::packShared(dir, GetParam().source, pack);
   ASSERT_TRUE(packed.isOk()) << packed.message();
-  auto grids = gdm::buildForcedGrids(pack);
+  gdm::FunctionReport rep;
+  auto grids = gdm::buildForcedGrids(pack, gdm::kDefaultFunctionBudget, &rep);
   ASSERT_TRUE(grids.isOk()) << grids.status().message();
+  // The bake gives a function only where rays would skip enough voxels, which few of these
+  // small cells do; here every cell gets one: the function itself is under test.
+  std::printf("[gdm-fn] %s: the bake's policy gave %u of %zu forced cells a function\n", GetParam().name, rep.baked,
+              grids->size());
+  for (gdm::CellGrid& g : *grids)
+    if (g.fn.rank == 0) gdm::bakeFunction(g);
   std::mt19937 rng(5);
   Tally t;
   for (const gdm::CellGrid& g : *grids)
