@@ -44,7 +44,11 @@ const char* kHelp =
     "                         samples; the others: pyramid nodes, voxels; vdm, gdm: lookups and\n"
     "                         fallbacks) from one counted pass over the cameras after the timed frames\n"
     "  --iterations LIST      ray-march step bounds for parallax (default 64)\n"
-    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
+    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"
+    "  --gdm-elsewhere M      gdm mode: how the cells that are height fields are drawn, exact (the\n"
+    "                         default) or parallax (--iterations): then gdm differs from parallax\n"
+    "                         only where it draws a forced cell's surface\n"
+    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
     "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
     "                         the parallax march (default 8)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time, and the\n"
@@ -179,6 +183,8 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
        << ", \"drawn_mode\": \"" << modeName(points ? RenderMode::kPoints : r.drawn_mode) << "\""
        << ", \"mode_gpu_bytes\": " << renderer.modeGpuBytes(c.settings.mode) << ", \"mode_disk_bytes\": " << ms.bytes
        << ", \"bake_s\": " << ms.bakeSeconds;
+  if (r.drawn_mode == RenderMode::kGdm)
+    json << ", \"gdm_elsewhere\": \"" << (c.settings.gdmParallaxElsewhere ? "parallax" : "exact") << "\"";
   if (budget)
     json << ", \"budget\": {\"uploads_per_frame\": " << r.uploads << ", \"evicted_per_frame\": " << r.evicted
          << ", \"coarsened_per_frame\": " << r.coarsened << ", \"missing_per_frame\": " << r.missing
@@ -201,9 +207,10 @@ void printTable(const std::vector<Row>& rows, const std::string& renderer) {
                "frame p95", "frame p99", "frame min", "fps", "gpu med", "drawn", "culled", "splats", "fragments", "work/ray", "work p99");
   for (const Row& r : rows) {
     const bool points = r.config.settings.mode == RenderMode::kPoints;
-    const bool exactMode = r.drawn_mode != RenderMode::kParallax && !points;
+    const bool gdmParallax = r.drawn_mode == RenderMode::kGdm && r.config.settings.gdmParallaxElsewhere;
+    const bool exactMode = r.drawn_mode != RenderMode::kParallax && !points && !gdmParallax;
     std::fprintf(stderr, "%-9s %5s %-18s %9.2f %9.2f %9.2f %9.2f %8.1f %9.2f %8.0f %8.0f %8.0f %12.0f %10.1f %8u\n",
-                 modeName(points ? RenderMode::kPoints : r.drawn_mode),
+                 gdmParallax ? "gdm+par" : modeName(points ? RenderMode::kPoints : r.drawn_mode),
                  points || exactMode ? "-" : std::to_string(r.config.settings.iterations).c_str(),
                  r.config.skips.c_str(), r.cpu.median, r.cpu.p95, r.cpu.p99, r.cpu.min, 1000.0 / std::max(r.cpu.median, 1e-9),
                  r.gpu.median, r.drawn, r.culled, r.splats, r.frags, r.work.mean(), r.work.p99);
@@ -296,7 +303,7 @@ std::string budgetErrorJson(const BudgetError& e) {
 int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "csv", "gpu-budget"},
+                     {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "gdm-elsewhere", "csv", "gpu-budget"},
                      {"compare-skips", "stream", "budget-error", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
@@ -333,7 +340,7 @@ int cmdBench(int argc, char** argv) {
   s = modesAndIterations(a, modes, iters);
   if (!s) return reportError(s);
   RenderSettings base;
-  s = slicesFromArgs(a, base);
+  s = modeSettingsFromArgs(a, base);
   if (!s) return reportError(s);
   base.useColor = !a.flag("no-color");
   base.grooveAA = !a.flag("no-groove-aa");
@@ -355,7 +362,8 @@ int cmdBench(int argc, char** argv) {
       c.settings.mode = m;
       c.settings.iterations = it;
       configs.push_back(c);
-      if (m != RenderMode::kParallax) break;  // no linear steps: one configuration
+      // No linear steps: one configuration (gdm has them where its height-field cells take parallax).
+      if (m != RenderMode::kParallax && !(m == RenderMode::kGdm && base.gdmParallaxElsewhere)) break;
     }
   }
   if (a.flag("compare-skips")) {

@@ -61,7 +61,11 @@ const char* kHelp =
     "                         else its fallback is drawn and said), slices, auto, points (default\n"
     "                         parallax); one row per mode (per --iterations for parallax)\n"
     "  --iterations LIST      parallax step bounds (default 64)\n"
-    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
+    "  --slices N|auto        slices mode: quads per cell (default 16; auto: from each cell's distance)\n"
+    "  --gdm-elsewhere M      gdm mode: how the cells that are height fields are drawn, exact (the\n"
+    "                         default) or parallax (--iterations): then gdm differs from parallax\n"
+    "                         only where it draws a forced cell's surface\n"
+    "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
     "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
     "                         the parallax march (default 8)\n"
     "  --repeat N             timed rounds over all views, after one warm-up round (median per\n"
@@ -398,7 +402,7 @@ int runEval(const Args& a) {
   s = parseOptions(a, pack, o);
   if (!s) return reportError(s);
   RenderSettings base;
-  s = slicesFromArgs(a, base);
+  s = modeSettingsFromArgs(a, base);
   if (!s) return reportError(s);
   base.useColor = false;  // both images shaded alike
   std::unique_ptr<Reference> ref;
@@ -430,8 +434,10 @@ int runEval(const Args& a) {
   if (!o.quiet)
     for (RenderMode mode : o.modes) warnIfModeFallsBack(renderer, pack, mode);
   for (RenderMode mode : o.modes) {
-    // Only parallax has linear steps; the others are one configuration each.
-    const bool stepped = renderer.drawnMode(mode) == RenderMode::kParallax && mode != RenderMode::kPoints;
+    // Only parallax has linear steps (and gdm drawing its height-field cells by it); the others
+    // are one configuration each.
+    const bool gdmParallax = renderer.drawnMode(mode) == RenderMode::kGdm && base.gdmParallaxElsewhere;
+    const bool stepped = (renderer.drawnMode(mode) == RenderMode::kParallax && mode != RenderMode::kPoints) || gdmParallax;
     const std::vector<int> its = stepped ? o.iterations : std::vector<int>{0};
     for (int it : its) {
       RenderSettings rs = base;
@@ -439,6 +445,7 @@ int runEval(const Args& a) {
       if (it > 0) rs.iterations = it;
       Row row;
       row.mode = modeName(mode == RenderMode::kPoints ? mode : renderer.drawnMode(mode));
+      if (gdmParallax) row.mode += "+parallax";
       row.iterations = it;
       row.skips = mode == RenderMode::kPoints ? "-" : "all";
       s = evaluateConfig(renderer, pack, o, ref.get(), samples.get(), rs, row);
@@ -473,7 +480,7 @@ int runEval(const Args& a) {
 int cmdEval(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "auto-pixels", "repeat",
+                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "auto-pixels", "gdm-elsewhere", "repeat",
                       "csv", "plot"},
                      {"far", "json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {

@@ -46,9 +46,13 @@ const char* kHelp =
     "  --slices N|auto        slices mode: quads per cell across the axis nearest the view (default 16);\n"
     "                         auto: per cell the fewest (a power of two, at most 64) that lie no farther\n"
     "                         apart along the view than a pixel at the cell's distance or a texel\n"
+    "  --gdm-elsewhere M      gdm mode: how the cells that are height fields are drawn, exact (the\n"
+    "                         default) or parallax (--iterations): then gdm differs from parallax\n"
+    "                         only where it draws a forced cell's surface\n"
     "  --auto-pixels P        auto mode: boxes under P pixels across are drawn as slices, a pixel\n"
     "                         apart along the view (depth error <= sqrt(3) pixels); the others by\n"
-    "                         the parallax march (default 8)\n"    "  --iterations N         linear ray-march steps per height field (default 64)\n"
+    "                         the parallax march (default 8)\n"
+    "  --iterations N         linear ray-march steps per height field (default 64)\n"
     "  --refine N             bisection steps after the linear search (default 6)\n"
     "  --no-groove-aa         grooves mode: one ray a pixel also where a groove is under 2 pixels wide\n"
     "  --no-color             ignore scan colours\n"
@@ -88,7 +92,7 @@ Status settingsFromArgs(const Args& a, RenderSettings& rs) {
     if (!v) return v.status();
     rs.iterations = static_cast<int>(*v);
   }
-  SA_RETURN_IF_ERROR(slicesFromArgs(a, rs));
+  SA_RETURN_IF_ERROR(modeSettingsFromArgs(a, rs));
   if (a.has("refine")) {
     auto v = parseInt("refine", a.get("refine"), 0, 64);
     if (!v) return v.status();
@@ -176,7 +180,7 @@ Status outputsFromArgs(const Args& a, size_t views, Outputs& out) {
 int cmdRender(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "auto-pixels", "refine",
+                     {"output", "orbit", "zoom", "path", "eye", "target", "up", "fov", "size", "depth-out", "iterations", "slices", "auto-pixels", "gdm-elsewhere", "refine",
                       "background", "shading", "clip-box", "section", "mode", "light", "gpu-budget"},
                      {"edl", "shadows", "boxes", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats", "no-sort",
                       "json", "quiet", "help"}, {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});

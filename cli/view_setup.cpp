@@ -124,7 +124,12 @@ void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m
                modeName(r.drawnMode(m)), pack.path().c_str(), mi.name);
 }
 
-Status slicesFromArgs(const Args& a, RenderSettings& rs) {
+Status modeSettingsFromArgs(const Args& a, RenderSettings& rs) {
+  if (a.has("gdm-elsewhere")) {
+    const std::string e = a.get("gdm-elsewhere");
+    if (e != "exact" && e != "parallax") return Status::badInput("--gdm-elsewhere: exact or parallax, not '" + e + "'");
+    rs.gdmParallaxElsewhere = e == "parallax";
+  }
   if (a.has("auto-pixels")) {
     auto v = parseNumber("auto-pixels", a.get("auto-pixels"));
     if (!v) return v.status();

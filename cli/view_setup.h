@@ -18,8 +18,9 @@ Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, 
 std::vector<std::string> splitList(const std::string& s);
 // --mode LIST (default parallax) and --iterations LIST (default kDefaultIterations), as bench and eval take them.
 Status modesAndIterations(const Args& a, std::vector<RenderMode>& modes, std::vector<int>& iterations);
-// --slices N|auto (the slices mode's quads per cell; auto: 0) into rs.slices when given.
-Status slicesFromArgs(const Args& a, RenderSettings& rs);
+// The modes' own settings, each when given: --slices N|auto (the slices mode's quads per cell;
+// auto: 0), --auto-pixels P, --gdm-elsewhere exact|parallax.
+Status modeSettingsFromArgs(const Args& a, RenderSettings& rs);
 // --opt with exactly `count` comma-separated numbers.
 Status numberList(const Args& a, const std::string& opt, size_t count, std::vector<double>& out);
 void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi);

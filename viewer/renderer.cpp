@@ -808,6 +808,7 @@ void Renderer::setCommonUniforms(GLuint p, const FrameUniforms& f, const RenderS
   glUniform3fv(glGetUniformLocation(p, "camLo"), 1, f.lo);
   glUniform1i(glGetUniformLocation(p, "refineSteps"), std::max(0, s.refineSteps));
   glUniform1i(glGetUniformLocation(p, "maxSteps"), std::max(1, s.iterations));
+  glUniform1i(glGetUniformLocation(p, "gdmParallaxElsewhere"), s.gdmParallaxElsewhere ? 1 : 0);
   glUniform1f(glGetUniformLocation(p, "nearPlane"), float(f.nearPlane));
   glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, f.fwd.data());
   glUniform1i(glGetUniformLocation(p, "useColor"), s.useColor && hasColor_ ? 1 : 0);

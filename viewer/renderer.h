@@ -63,6 +63,10 @@ struct RenderSettings {
   // this many rays across them (off: one ray per pixel, as wide grooves).
   bool grooveAA = true;
   int grooveSamples = 8;
+  // gdm mode: the cells that are height fields (no voxel grid), and rays of forced cells that
+  // pass no voxel near the samples, take the parallax march (iterations) instead of exact's
+  // traversal: gdm then differs from parallax only where it draws a forced cell's surface.
+  bool gdmParallaxElsewhere = false;
 };
 
 // Per-frame work of the surface casts (RenderSettings::countWork): a ray is one fragment's cast;

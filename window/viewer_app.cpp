@@ -326,8 +326,8 @@ Status runCommand(AppState& s, GLFWwindow* win, const ScriptCommand& c, bool& qu
   return Status::ok();
 }
 
-// The slices count (0: auto, from each cell's distance) and axis; auto mode's switch size; the
-// grooves mode's anti-aliasing.
+// The slices count (0: auto, from each cell's distance) and axis; auto mode's switch size; how
+// gdm draws its height-field cells; the grooves mode's anti-aliasing.
 void drawLodSettings(AppState& s) {
   if (s.rs.mode == RenderMode::kSlices) {
     ImGui::SliderInt("slices (0 auto)", &s.rs.slices, 0, kAutoSlices);
@@ -340,6 +340,8 @@ void drawLodSettings(AppState& s) {
     if (ImGui::SliderFloat("slices under (px)", &px, 1.f, 64.f, "%.0f")) s.rs.autoPixels = px;
     ImGui::Text("%u boxes as slices, %u marched, %u splats", s.stats.sliced, s.stats.drawn, s.stats.splats);
   }
+  if (s.rs.mode == RenderMode::kGdm)
+    ImGui::Checkbox("height-field cells by parallax (else exact)", &s.rs.gdmParallaxElsewhere);
   if (s.rs.mode == RenderMode::kGrooves) {
     ImGui::Checkbox("anti-alias grooves under 2 px", &s.rs.grooveAA);
     if (s.rs.grooveAA) ImGui::SliderInt("rays across a narrow groove", &s.rs.grooveSamples, 2, 32);

@@ -288,6 +288,18 @@ TEST(Cli, ModesBakeInfoBenchAndFallback) {
   for (const auto& m : gj["modes"])
     if (m["mode"] == "gdm" || m["mode"] == "exact") EXPECT_TRUE(m["present"].get<bool>()) << m.dump();
   EXPECT_EQ(run("verify " + d.file("g.hfa")).code, 0);
+  // --gdm-elsewhere parallax: gdm's height-field cells march, so its rows follow --iterations.
+  CmdResult ge = run("bench " + d.file("g.hfa") +
+                     " --orbit 1 --size 64x64 --warmup 0 --frames 1 --mode gdm --iterations 8,16 --gdm-elsewhere parallax --json");
+  ASSERT_EQ(ge.code, 0) << ge.err;
+  auto gc = nlohmann::json::parse(ge.out)["configs"];
+  ASSERT_EQ(gc.size(), 2u);
+  EXPECT_EQ(gc[1]["iterations"].get<int>(), 16);
+  EXPECT_EQ(gc[1]["gdm_elsewhere"].get<std::string>(), "parallax");
+  CmdResult bad = runErr("render " + d.file("g.hfa") + " -o " + d.file("r.png") + " --gdm-elsewhere bogus", d.file("err2.txt"));
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_NE(bad.err.find("--gdm-elsewhere"), std::string::npos) << bad.err;
+  EXPECT_FALSE(std::filesystem::exists(d.file("r.png")));
 }
 
 TEST(Cli, KilledPackLeavesNoHalfWrittenPackAndIsCleanedUpNextTime) {

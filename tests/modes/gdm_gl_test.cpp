@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <fstream>
 
+#include "../common/pack_util.h"
 #include "../common/render_util.h"
 #include "modes/exact/exact.h"
 #include "modes/gdm/gdm.h"
@@ -299,6 +300,54 @@ class GdmGl : public test::GlTest {
     EXPECT_TRUE(g.iou() > par.iou() || g.p95() < par.p95()) << name << ": gdm must beat parallax on forced pixels";
   }
 };
+
+// gdm with --gdm-elsewhere parallax on the bunny's raw scans: a pixel that the same height-field
+// cell draws in both renders has parallax's depth, and the forced cells' pixels are gdm's own.
+TEST_F(GdmGl, ParallaxElsewhereDrawsTheHeightFieldCellsAsParallaxOnBunnyScans) {
+  test::TempDir dir;
+  {
+    PackReader packed;
+    ASSERT_TRUE(test::packShared(dir, "stanford_bunny/scans/bun.conf", packed).isOk());
+  }
+  std::vector<std::string> report;
+  ASSERT_TRUE(bakeModes(dir.file("p.hfa"), dir.file("p.hfa"), {RenderMode::kGdm}, report).isOk());
+  PackReader p;
+  ASSERT_TRUE(p.open(dir.file("p.hfa")).isOk());
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  ASSERT_TRUE(r.modeReady(RenderMode::kGdm));
+  const Eigen::Vector3d lo = Eigen::Vector3d(p.meta().boundsMin) + Eigen::Vector3d(p.meta().origin);
+  const Eigen::Vector3d hi = Eigen::Vector3d(p.meta().boundsMax) + Eigen::Vector3d(p.meta().origin);
+  size_t same = 0, equal = 0, forcedPixels = 0, forcedDiffer = 0;
+  for (const Camera& cam : orbitCameras(lo, hi, 4, Eigen::Vector3d::UnitY(), 40, 256, 256)) {
+    RenderSettings rs;
+    rs.cull.subpixelSplats = false;
+    rs.iterations = 12;
+    rs.mode = RenderMode::kGdm;
+    rs.gdmParallaxElsewhere = true;
+    FrameResult fg, fp;
+    ASSERT_TRUE(r.render(cam, rs, fg, kReadDepth | kReadCells).isOk());
+    ASSERT_EQ(fg.stats.drawnMode, RenderMode::kGdm);
+    rs.mode = RenderMode::kParallax;
+    ASSERT_TRUE(r.render(cam, rs, fp, kReadDepth | kReadCells).isOk());
+    auto forced = [&](uint32_t id) { return id && (p.cells()[id - 1].flags & kCellForced); };
+    for (size_t i = 0; i < fg.cells.size(); ++i) {
+      if (forced(fg.cells[i]) || forced(fp.cells[i])) {
+        ++forcedPixels;
+        forcedDiffer += fg.cells[i] != fp.cells[i] || std::abs(fg.depth[i] - fp.depth[i]) > 1e-5f * std::abs(fp.depth[i]);
+      } else if (fg.cells[i] && fg.cells[i] == fp.cells[i]) {
+        ++same;
+        equal += std::abs(fg.depth[i] - fp.depth[i]) <= 1e-5f * std::abs(fp.depth[i]);
+      }
+    }
+  }
+  std::printf("[gdm-gl] bunny scans, gdm with parallax elsewhere: %zu of %zu height-field pixels at parallax's depth; "
+              "%zu of %zu forced-cell pixels differ from parallax\n",
+              equal, same, forcedDiffer, forcedPixels);
+  EXPECT_GT(same, 20000u);
+  EXPECT_EQ(equal, same);
+  EXPECT_GT(forcedDiffer, 0u);
+}
 
 TEST_F(GdmGl, WireLoopMesh) { run("wire_mesh", wireLoop(), false, true); }
 TEST_F(GdmGl, WireLoopPoints) { run("wire_points", wireLoop(), true, true); }
