@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "common/ray_box.h"
+
 namespace sa {
 
 CpuRaycaster::CpuRaycaster(const PackReader& pack) : pack_(pack), pyramids_(exact::buildPyramids(pack)) {
@@ -65,18 +67,8 @@ RayHit CpuRaycaster::cast(const Eigen::Vector3d& ro, const Eigen::Vector3d& rd, 
     const Eigen::Vector3d U(c.u), V(c.v), W(c.w), rel = ro - Eigen::Vector3d(c.origin);
     const Eigen::Vector3d o(rel.dot(U), rel.dot(V), rel.dot(W)), d(rd.dot(U), rd.dot(V), rd.dot(W));
     double t0 = 0, t1 = best.t;
-    for (int a = 0; a < 3; ++a) {
-      const double lo = c.box[2 * a], hi = c.box[2 * a + 1];
-      if (std::abs(d[a]) < 1e-300) {
-        if (o[a] < lo || o[a] > hi) { t0 = 1; t1 = 0; }
-        continue;
-      }
-      double ta = (lo - o[a]) / d[a], tb = (hi - o[a]) / d[a];
-      if (ta > tb) std::swap(ta, tb);
-      t0 = std::max(t0, ta);
-      t1 = std::min(t1, tb);
-    }
-    if (!(t0 < t1)) continue;
+    if (!clipRayToBox(Eigen::Vector3d(c.box[0], c.box[2], c.box[4]), Eigen::Vector3d(c.box[1], c.box[3], c.box[5]), o, d, t0, t1))
+      continue;
     double t;
     if (exact::traceCell(pack_, c, pyramids_.codes.data() + pyramids_.offsets[ci], o, d, t0, t1, t, stats) &&
         t < best.t) {

@@ -14,6 +14,7 @@
 #include <unordered_map>
 
 #include "formats/source.h"
+#include "common/ray_box.h"
 #include "modes/pack_sources.h"
 #include "preprocess/normals.h"
 
@@ -398,14 +399,7 @@ double skippableVoxels(const CellRecord& c, const CellGrid& g, int rays) {
     const Eigen::Vector3d inBox = lo + Eigen::Vector3d(unit(rng), unit(rng), unit(rng)).cwiseProduct(size);
     const Eigen::Vector3d o = inBox - d * (2 * size.norm());
     double t0 = 0, t1 = 1e300;
-    for (int a = 0; a < 3; ++a) {
-      if (d[a] == 0) continue;
-      double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
-      if (ta > tb) std::swap(ta, tb);
-      t0 = std::max(t0, ta);
-      t1 = std::min(t1, tb);
-    }
-    if (!(t0 < t1)) continue;
+    if (!clipRayToBox(lo, hi, o, d, t0, t1)) continue;
     // The voxels before the first known one, as many as the DDA would step through.
     const int steps = 4 * (g.nx + g.ny + g.nz);
     double skipped = 0;

@@ -14,11 +14,8 @@
 // two pixels is anti-aliased over the pixel's footprint (003 eq. 6's area ratios, here
 // integrated by grooveSamples rays across the groove, each cast through the grooves' profiles
 // on the rim plane). Cells without grooves cast their height field alone.
-#define castCell parallaxCastCell
-#define shadowRay parallaxShadowRay
+#define PARALLAX_NO_CAST 1
 #include "parallax_cast.glsl"
-#undef castCell
-#undef shadowRay
 
 #define MODE_POST_SHADE 1
 #define MODE_EXTENDS_BOX 1
@@ -285,7 +282,7 @@ float gFloorCrossing(Cell c, GPiece p, vec3 o, vec3 d, float t0, float t1) {
 // goes on from there.
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
   uint blk = grooveEntry[cell];
-  if (blk == kNoGrooves) return parallaxCastCell(c, cell, boxSteps, o, d, tEnter, tExit, tHit, work);
+  if (blk == kNoGrooves) return parallaxTrace(c, boxSteps, o, d, tEnter, tExit, tHit, work);
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
   float eps = 1e-3 * min(texel.x, texel.y);
   // Before h's hit the ray is above h; a floor rises above h by at most `rise` (0: nowhere).
@@ -299,7 +296,7 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
   vec3 tn = min(t0, t1), tf = max(t0, t1);
   float hEnter = max(max(max(tn.x, tn.y), tn.z), 0.0), hExit = min(min(tf.x, tf.y), tf.z);
   work = 0u;
-  bool hh = hEnter < hExit && parallaxCastCell(c, cell, boxSteps, o, d, hEnter, hExit, th, work);
+  bool hh = hEnter < hExit && parallaxTrace(c, boxSteps, o, d, hEnter, hExit, th, work);
   int air, lowest;
   // The common case: no floor rises above the height field, and its hit is in no capsule.
   bool usual = hh && rise == 0.0 && !gCover(c, blk, o + d * th, air, lowest);

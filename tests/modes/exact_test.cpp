@@ -10,6 +10,7 @@
 #include <cstring>
 #include <random>
 
+#include "common/ray_box.h"
 #include "atlas/raycast.h"
 #include "modes/exact/exact.h"
 #include "preprocess/pipeline.h"
@@ -56,17 +57,7 @@ std::vector<Ray> randomRays(const PackReader& pack, int n, uint32_t seed) {
       r.o = target - d * (size.norm() * 2 + 1e-9);
     }
     double t0 = 0, t1 = 1e300;
-    for (int a = 0; a < 3; ++a) {
-      if (r.d[a] == 0) {
-        if (r.o[a] < lo[a] || r.o[a] > hi[a]) t0 = 1, t1 = 0;
-        continue;
-      }
-      double ta = (lo[a] - r.o[a]) / r.d[a], tb = (hi[a] - r.o[a]) / r.d[a];
-      if (ta > tb) std::swap(ta, tb);
-      t0 = std::max(t0, ta);
-      t1 = std::min(t1, tb);
-    }
-    if (!(t0 < t1)) continue;
+    if (!clipRayToBox(lo, hi, r.o, r.d, t0, t1)) continue;
     r.t0 = t0;
     r.t1 = t1;
     rays.push_back(r);

@@ -13,6 +13,7 @@
 
 #include "../common/pack_util.h"
 #include "../common/render_util.h"
+#include "common/ray_box.h"
 #include "modes/exact/exact.h"
 #include "modes/gdm/gdm.h"
 #include "modes/registry.h"
@@ -237,18 +238,13 @@ class GdmGl : public test::GlTest {
           const Eigen::Vector3d rel = cams[0].eye - origin - Eigen::Vector3d(c.origin);
           const Eigen::Vector3d o(rel.dot(U), rel.dot(V), rel.dot(W)), d(dir.dot(U), dir.dot(V), dir.dot(W));
           double t0 = 0, t1 = 1e300;
-          for (int a = 0; a < 3; ++a) {
-            if (d[a] == 0) continue;
-            double ta = (c.box[2 * a] - o[a]) / d[a], tb = (c.box[2 * a + 1] - o[a]) / d[a];
-            if (ta > tb) std::swap(ta, tb);
-            t0 = std::max(t0, ta);
-            t1 = std::min(t1, tb);
-          }
+          const bool inBox = clipRayToBox(Eigen::Vector3d(c.box[0], c.box[2], c.box[4]),
+                                          Eigen::Vector3d(c.box[1], c.box[3], c.box[5]), o, d, t0, t1);
           double t;
           ++drawn;
           bool touched = false;
-          bool hit = t0 < t1 && gdm::traceGuided(c, grid, o, d, t0, t1, t, nullptr, nullptr, &touched);
-          if (!hit && !touched && t0 < t1) {  // no occupied voxel passed: the cell's height field, as the shader
+          bool hit = inBox && gdm::traceGuided(c, grid, o, d, t0, t1, t, nullptr, nullptr, &touched);
+          if (!hit && !touched && inBox) {  // no occupied voxel passed: the cell's height field, as the shader
             std::vector<uint16_t> pyr;
             exact::buildCellPyramid(p, c, pyr);
             hit = exact::traceCell(p, c, pyr.data(), o, d, t0, t1, t);

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <random>
 
+#include "common/ray_box.h"
 #include "modes/gdm/gdm.h"
 #include "preprocess/pipeline.h"
 #include "../common/pack_util.h"
@@ -45,14 +46,7 @@ void castRays(const CellRecord& c, const gdm::CellGrid& g, int count, std::mt199
     d.normalize();
     o = k % 4 == 3 ? inBox : Eigen::Vector3d(inBox - d * (2 * size.norm()));
     double t0 = 0, t1 = 1e300;
-    for (int a = 0; a < 3; ++a) {
-      if (d[a] == 0) continue;
-      double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
-      if (ta > tb) std::swap(ta, tb);
-      t0 = std::max(t0, ta);
-      t1 = std::min(t1, tb);
-    }
-    if (!(t0 < t1)) continue;
+    if (!clipRayToBox(lo, hi, o, d, t0, t1)) continue;
     ++t.rays;
     double tw = 0, tg = 0;
     bool touchedW = false, touchedG = false;
