@@ -515,6 +515,8 @@ Status Renderer::initModes(const PackReader& pack) {
       if (!v->present || !g.mipBuf) continue;  // gdm's other cells draw exact
       gdmBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.gdmEntryBuf, g.gdmWordBuf);
       gpuBytes_ += gdmBytes_;
+      gdmKind_.assign(v->header.cellCount, 0);
+      for (uint32_t i = 0; i < v->header.cellCount; ++i) gdmKind_[i] = v->entries[i] != gdm::kNoEntry ? 2 : 0;
     }
     if (mi.mode == RenderMode::kGrooves) {
       auto v = gcast::readSection(pack);
@@ -767,16 +769,22 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   st.splats = static_cast<uint32_t>(vis.splats.size());
   st.sliced = static_cast<uint32_t>(vis.sliced.size());
   st.missing = static_cast<uint32_t>(vis.missing.size());
-  // grooves: the boxes of cells with grooves apart, by the program that draws them.
-  for (auto& l : grooveLists_) l.clear();
-  if (s.mode == RenderMode::kGrooves && !grooveKind_.empty()) {
+  // grooves, and gdm with parallax elsewhere: the boxes of the cells the mode's own programs draw
+  // apart, by the program that draws them; the others stay for parallax's (llvmpipe pays for a
+  // program's size on every pixel it draws).
+  for (auto& l : ownLists_) l.clear();
+  const RenderMode drawn = drawnMode(s.mode);  // not the mode's own programs where it falls back
+  const std::vector<uint8_t>* kind = drawn == RenderMode::kGrooves ? &grooveKind_
+                                     : drawn == RenderMode::kGdm && s.gdmParallaxElsewhere ? &gdmKind_
+                                                                                            : nullptr;
+  if (kind && !kind->empty()) {
     for (int side = 0; side < 2; ++side) {
       std::vector<DrawItem>& list = side ? vis.inside : vis.front;
       size_t keep = 0;
       for (const DrawItem& it : list) {
-        const uint8_t k = it.cell < grooveKind_.size() ? grooveKind_[it.cell] : 0;
+        const uint8_t k = it.cell < kind->size() ? (*kind)[it.cell] : 0;
         if (k == 0) list[keep++] = it;
-        else grooveLists_[(k - 1) * 2 + side].push_back(it);
+        else ownLists_[(k - 1) * 2 + side].push_back(it);
       }
       list.resize(keep);
     }
@@ -796,7 +804,7 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
 }
 
 std::array<const std::vector<DrawItem>*, 8> Renderer::drawOrder(const VisibleSet& vis) const {
-  return {&vis.front, &vis.inside, &vis.splats, &vis.sliced, &grooveLists_[0], &grooveLists_[1], &grooveLists_[2], &grooveLists_[3]};
+  return {&vis.front, &vis.inside, &vis.splats, &vis.sliced, &ownLists_[0], &ownLists_[1], &ownLists_[2], &ownLists_[3]};
 }
 
 // Uniforms every surface program reads: camera, projection, shading, clipping.
@@ -808,7 +816,6 @@ void Renderer::setCommonUniforms(GLuint p, const FrameUniforms& f, const RenderS
   glUniform3fv(glGetUniformLocation(p, "camLo"), 1, f.lo);
   glUniform1i(glGetUniformLocation(p, "refineSteps"), std::max(0, s.refineSteps));
   glUniform1i(glGetUniformLocation(p, "maxSteps"), std::max(1, s.iterations));
-  glUniform1i(glGetUniformLocation(p, "gdmParallaxElsewhere"), s.gdmParallaxElsewhere ? 1 : 0);
   glUniform1f(glGetUniformLocation(p, "nearPlane"), float(f.nearPlane));
   glUniform3fv(glGetUniformLocation(p, "viewForward"), 1, f.fwd.data());
   glUniform1i(glGetUniformLocation(p, "useColor"), s.useColor && hasColor_ ? 1 : 0);
@@ -902,8 +909,10 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     drawSlices(vis.front, s.slices, kAutoSlices);
     drawSlices(vis.inside, s.slices, kAutoSlices);
   } else {
-    // (grooves: these are the cells without grooves, drawn by parallax's programs; below, the others)
-    const int plain = RenderMode(m) == RenderMode::kGrooves ? int(RenderMode::kParallax) : m;
+    // (grooves, gdm with parallax elsewhere: these are the cells without grooves or voxels, drawn by
+    // parallax's programs; below, the others)
+    const bool ownApart = RenderMode(m) == RenderMode::kGrooves || (RenderMode(m) == RenderMode::kGdm && s.gdmParallaxElsewhere);
+    const int plain = ownApart ? int(RenderMode::kParallax) : m;
     drawList(vis.front, g.front[plain], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
     drawList(vis.inside, g.inside[plain], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
   }
@@ -914,11 +923,11 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   while (autoMax < kAutoSlices && autoMax < s.autoPixels) autoMax *= 2;
   drawSlices(vis.sliced, 0, autoMax);
   glEnable(GL_CULL_FACE);
-  const int gm = int(RenderMode::kGrooves);
-  drawList(grooveLists_[0], g.grooveFlatFront, GL_BACK, GL_TRIANGLES, 36);
-  drawList(grooveLists_[1], g.grooveFlatInside, GL_FRONT, GL_TRIANGLES, 36);
-  drawList(grooveLists_[2], g.front[gm], GL_BACK, GL_TRIANGLES, 36);
-  drawList(grooveLists_[3], g.inside[gm], GL_FRONT, GL_TRIANGLES, 36);
+  const int gm = RenderMode(m) == RenderMode::kGdm ? int(RenderMode::kGdm) : int(RenderMode::kGrooves);
+  drawList(ownLists_[0], g.grooveFlatFront, GL_BACK, GL_TRIANGLES, 36);
+  drawList(ownLists_[1], g.grooveFlatInside, GL_FRONT, GL_TRIANGLES, 36);
+  drawList(ownLists_[2], g.front[gm], GL_BACK, GL_TRIANGLES, 36);
+  drawList(ownLists_[3], g.inside[gm], GL_FRONT, GL_TRIANGLES, 36);
   glDisable(GL_CULL_FACE);
   if (!s.showBoxes) return;
   // The decomposition view: every drawn box's edges, depth-tested against the surface.

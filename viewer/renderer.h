@@ -63,9 +63,9 @@ struct RenderSettings {
   // this many rays across them (off: one ray per pixel, as wide grooves).
   bool grooveAA = true;
   int grooveSamples = 8;
-  // gdm mode: the cells that are height fields (no voxel grid), and rays of forced cells that
-  // pass no voxel near the samples, take the parallax march (iterations) instead of exact's
-  // traversal: gdm then differs from parallax only where it draws a forced cell's surface.
+  // gdm mode: the cells that are height fields (no voxel grid) are drawn by parallax's programs
+  // (the march, iterations) instead of exact's traversal: gdm then differs from parallax only in
+  // the forced cells (whose rays that pass no voxel near the samples still take exact).
   bool gdmParallaxElsewhere = false;
 };
 
@@ -212,8 +212,11 @@ class Renderer {
   // the height field: the program without that search), 2 (the whole cast); this frame's boxes of
   // kinds 1 and 2, camera outside / inside (a mode's shader costs on every pixel of every box it
   // draws, taken branches or not, so a box gets the least program that draws it exactly).
-  std::vector<uint8_t> grooveKind_;
-  std::vector<DrawItem> grooveLists_[4];  // flat front, flat inside, rise front, rise inside
+  std::vector<uint8_t> grooveKind_;  // per cell: 0 no grooves, 1 floors never above h, 2 the whole cast
+  std::vector<uint8_t> gdmKind_;     // per cell: 2 a voxel grid (forced), 0 none
+  // The boxes a mode's own programs draw, apart from those parallax's draw (grooves; gdm with
+  // parallax elsewhere): grooves' flat front and inside, then the whole cast's front and inside.
+  std::vector<DrawItem> ownLists_[4];
   // The frame's draw lists in upload order (their offsets in the item buffer follow it).
   std::array<const std::vector<DrawItem>*, 8> drawOrder(const VisibleSet& vis) const;
   double spacing_ = 0;

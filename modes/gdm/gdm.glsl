@@ -5,21 +5,10 @@
 // cell's implicit surface from outside to inside is the hit, its gradient the normal
 // (gdm_voxels.glsl). A ray that passes no known voxel at all (samples too sparse for the band to
 // reach: scan edges, cracks the pack's pull-push closed) takes the cell's height field instead.
-// Other cells: the exact traversal.
+// Other cells: the exact traversal (with RenderSettings::gdmParallaxElsewhere the renderer draws
+// them by parallax's programs instead, and only the forced cells by this one).
 #define EXACT_NO_CAST 1
 #include "exact.glsl"
-#define PARALLAX_NO_CAST 1
-#include "parallax_cast.glsl"
-
-// RenderSettings::gdmParallaxElsewhere: the cells without a grid (height fields) take the
-// parallax march instead of the exact traversal.
-uniform bool gdmParallaxElsewhere;
-
-bool gdmElsewhere(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
-  if (gdmParallaxElsewhere) return parallaxTrace(c, boxSteps, o, d, tEnter, tExit, tHit, work);
-  return exactTrace(c, cell, o, d, tEnter, tExit, tHit, work);
-}
-
 #include "gdm_voxels.glsl"
 
 float gdmHalf(uint base, uint h) {
@@ -82,7 +71,7 @@ bool gdmTrace(Cell c, uint blk, vec3 o, vec3 d, float t0, float t1, out float tH
 
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
   uint blk = gdmEntry[cell];
-  if (blk == 0xffffffffu) return gdmElsewhere(c, cell, boxSteps, o, d, tEnter, tExit, tHit, work);
+  if (blk == 0xffffffffu) return exactTrace(c, cell, o, d, tEnter, tExit, tHit, work);
   vec3 n;
   bool touched;
   if (gdmTrace(c, blk, o, d, tEnter, tExit, tHit, n, work, touched)) {
@@ -92,14 +81,14 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
   }
   if (touched) return false;  // it passed near the samples and met no surface: nothing there
   uint nodes;
-  bool found = gdmElsewhere(c, cell, boxSteps, o, d, tEnter, tExit, tHit, nodes);
+  bool found = exactTrace(c, cell, o, d, tEnter, tExit, tHit, nodes);
   work += nodes;
   return found;
 }
 
 bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   uint blk = gdmEntry[cell];
-  if (blk == 0xffffffffu) return gdmParallaxElsewhere ? parallaxShadowRay(c, p, l) : exactShadowRay(c, cell, p, l);
+  if (blk == 0xffffffffu) return exactShadowRay(c, cell, p, l);
   vec3 vs = vec3(uintBitsToFloat(gdmWord[blk + 3u]), uintBitsToFloat(gdmWord[blk + 4u]), uintBitsToFloat(gdmWord[blk + 5u]));
   float start = 0.75 * length(vs);  // off the hit's own surface
   vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
