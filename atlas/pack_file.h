@@ -73,6 +73,20 @@ struct ExtraSection {
   std::vector<uint8_t> bytes;
 };
 
+// The axis-aligned bounds, relative to the pack origin, of a cell's box grown by pad (frame units)
+// on every side: the box's eight corners through its frame.
+inline void cellBounds(const CellRecord& c, double pad, Eigen::Vector3d& lo, Eigen::Vector3d& hi) {
+  const Eigen::Vector3d O(c.origin), U(c.u), V(c.v), W(c.w);
+  lo = Eigen::Vector3d::Constant(INFINITY);
+  hi = -lo;
+  for (int k = 0; k < 8; ++k) {
+    const Eigen::Vector3d p = O + U * ((k & 1) ? c.box[1] + pad : c.box[0] - pad) + V * ((k & 2) ? c.box[3] + pad : c.box[2] - pad) +
+                              W * ((k & 4) ? c.box[5] + pad : c.box[4] - pad);
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+}
+
 class PackReader;
 // Writes `out` (atomically; it may be the input's own path): every section of `in` except
 // those `add` replaces, then `add`. Nothing else changes, so the pack's hash stays valid.

@@ -621,19 +621,6 @@ class Buckets {
   std::unordered_map<uint64_t, std::vector<uint32_t>> map_;
 };
 
-// The bounds (relative to the pack origin) of a cell's box grown by pad.
-void cellBounds(const CellRecord& c, double pad, Eigen::Vector3d& lo, Eigen::Vector3d& hi) {
-  const Eigen::Vector3d O(c.origin), U(c.u), V(c.v), W(c.w);
-  lo = Eigen::Vector3d::Constant(INFINITY);
-  hi = -lo;
-  for (int k = 0; k < 8; ++k) {
-    const Eigen::Vector3d p = O + U * ((k & 1) ? c.box[1] + pad : c.box[0] - pad) + V * ((k & 2) ? c.box[3] + pad : c.box[2] - pad) +
-                              W * ((k & 4) ? c.box[5] + pad : c.box[4] - pad);
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
-}
-
 // A forced cell's source samples in its frame, within pad of its box: a single mesh's triangles
 // sampled half a voxel apart with their face normals, else the points.
 Samples cellSamples(const Collect& all, const Buckets& buckets, bool meshes, const CellRecord& c, double pad,
@@ -691,17 +678,21 @@ double samplePad(const CellRecord& c, bool triangles, double spacing) {
 
 }  // namespace
 
+// A function of the given rank's bytes in the section.
+namespace {
+uint64_t functionBytes(const CellGrid& g, uint64_t rank) {
+  return 4 * (((uint64_t(g.nx) * g.ny * kPhiBins * rank) + 1) / 2 + ((uint64_t(g.nz) * kThetaBins * rank) + 1) / 2);
+}
+}  // namespace
+
+uint64_t functionBytes(const CellGrid& g) { return functionBytes(g, uint64_t(g.fn.rank)); }
+
 // The direction functions where they pay, under a byte budget: the cells whose random rays would
 // skip kWorthAFunction voxels or more (the real scans' forced cells skip 1.3-1.7 at the median,
 // about what a lookup costs; lone-star's 8290 cells had 303 MiB of functions, most of a 4-minute
 // bake), most skipped first, baked 16 at a time; a function is kept while its bytes still fit, and
 // after a batch that kept none the rest are left out. The batches do not depend on the machine,
 // so neither do the bytes. tick: once per cell looked at.
-uint64_t functionBytes(const CellGrid& g) {
-  const uint64_t k = uint64_t(g.fn.rank);
-  return 4 * (((uint64_t(g.nx) * g.ny * kPhiBins * k) + 1) / 2 + ((uint64_t(g.nz) * kThetaBins * k) + 1) / 2);
-}
-
 void bakeFunctions(std::vector<CellGrid>& grids, const std::vector<double>& skip, uint64_t budget, FunctionReport* report,
                    const std::function<void()>& tick0) {
   auto tick = [&] {
@@ -721,8 +712,7 @@ void bakeFunctions(std::vector<CellGrid>& grids, const std::vector<double>& skip
     tbb::parallel_for(at, end, [&](size_t i) {
       CellGrid& g = grids[order[i]];
       // A rank-1 function is the least it can take: not even that fits, nothing to bake.
-      const uint64_t least = 4 * ((uint64_t(g.nx) * g.ny * kPhiBins + 1) / 2 + (uint64_t(g.nz) * kThetaBins + 1) / 2);
-      if (rep.bytes + least <= budget) bakeFunction(g);
+      if (rep.bytes + functionBytes(g, 1) <= budget) bakeFunction(g);
       tick();
     });
     bool kept = false;

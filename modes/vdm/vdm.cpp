@@ -270,14 +270,10 @@ uint64_t blockBound(const CellRecord& c) {
 
 bool meetsClip(const PackReader& pack, const CellRecord& c, const Selection& sel) {
   if (!sel.clip) return true;
-  const Eigen::Vector3d origin(pack.meta().origin), O(c.origin), U(c.u), V(c.v), W(c.w);
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-  for (int k = 0; k < 8; ++k) {
-    const Eigen::Vector3d p = origin + O + U * c.box[k & 1] + V * c.box[2 + ((k >> 1) & 1)] + W * c.box[4 + ((k >> 2) & 1)];
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
-  return (lo.array() <= sel.hi.array()).all() && (hi.array() >= sel.lo.array()).all();
+  const Eigen::Vector3d origin(pack.meta().origin);
+  Eigen::Vector3d lo, hi;
+  cellBounds(c, 0, lo, hi);
+  return ((lo + origin).array() <= sel.hi.array()).all() && ((hi + origin).array() >= sel.lo.array()).all();
 }
 
 void appendBlock(const CellFunction& fn, std::vector<uint32_t>& words) {
