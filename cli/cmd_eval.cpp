@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -72,6 +73,13 @@ const char* kHelp =
     "                         view; default 3)\n"
     "  --csv FILE             one row per view and configuration plus 'all' summary rows\n"
     "  --plot FILE.png        run time vs error plot (also FILE.svg); needs python3-matplotlib\n"
+    "  --images DIR           also write, per view and configuration, what was measured:\n"
+    "                         LABEL_V.png (the shaded render), LABEL_V.pfm (its linear view depth)\n"
+    "                         and with --reference LABEL_V_error.png (grey: both cover, brighter\n"
+    "                         and redder up to 0.2 % of the diagonal of depth error; blue: the\n"
+    "                         render alone covers; yellow: the reference alone),\n"
+    "                         LABEL_V_normal_error.pfm (degrees; inf where not both), reference_V.png\n"
+    "                         and reference_V.pfm. LABEL is e.g. parallax-12, gdm+parallax-12, exact\n"
     "  --json                 summary as JSON on stdout\n"
     "  -q, --quiet            no tables (per view and summary, on stderr)\n";
 
@@ -81,6 +89,7 @@ struct Options {
   std::vector<int> iterations;
   int repeat = 3;
   double maxEdge = 0;
+  std::string imagesDir;  // --images: what each view measured, as files
   bool far = false, quiet = false, json = false;
 };
 
@@ -134,6 +143,12 @@ Status parseOptions(const Args& a, const PackReader& pack, Options& o) {
     if (a.has(opt)) SA_RETURN_IF_ERROR(checkNotAnInput(a.get(opt), inputs, std::string("--") + opt));
   if (a.has("plot"))
     SA_RETURN_IF_ERROR(checkNotAnInput(std::filesystem::path(a.get("plot")).replace_extension(".svg").string(), inputs, "--plot"));
+  if (a.has("images")) {
+    o.imagesDir = a.get("images");
+    std::error_code ec;
+    if (std::filesystem::exists(o.imagesDir, ec) && !std::filesystem::is_directory(o.imagesDir, ec))
+      return Status::badInput(o.imagesDir + ": --images names a folder, and this is a file");
+  }
   o.json = a.flag("json");
   o.quiet = a.flag("quiet") || o.json;
   return Status::ok();
@@ -173,6 +188,71 @@ Status timeViews(Renderer& renderer, const Options& o, const RenderSettings& rs,
   return Status::ok();
 }
 
+std::string fileLabel(const Row& r) {
+  return r.mode + (r.iterations ? "-" + std::to_string(r.iterations) : "");
+}
+
+// Where a render's coverage and depth differ from the reference's: grey where both cover
+// (brighter and redder with the depth error, saturated at 0.2 % of the diagonal), blue where
+// the render alone covers, yellow where the reference alone does, black where neither.
+Image errorMap(const std::vector<float>& depth, const std::vector<float>& ref, int w, int h, double diag) {
+  Image img{w, h, std::vector<uint8_t>(size_t(w) * h * 4, 0)};
+  for (size_t i = 0; i < depth.size(); ++i) {
+    uint8_t* p = &img.rgba[i * 4];
+    const bool t = std::isfinite(depth[i]), r = std::isfinite(ref[i]);
+    p[3] = 255;
+    if (t && r) {
+      const double e = std::min(1.0, std::abs(double(depth[i]) - ref[i]) / (0.002 * diag));
+      p[0] = uint8_t(70 + 185 * e);
+      p[1] = p[2] = uint8_t(70 + 60 * e * (1 - e));
+    } else if (t) {
+      p[0] = 0, p[1] = 128, p[2] = 255;
+    } else if (r) {
+      p[0] = 255, p[1] = 255, p[2] = 0;
+    }
+  }
+  return img;
+}
+
+// The angle (degrees) between the render's and the reference's normals where both cover and the
+// render has a normal (as evaluateView measures it: lines, not signs), else +inf.
+std::vector<float> normalErrorMap(const std::vector<float>& tn, const ReferenceView& ref, size_t pixels) {
+  std::vector<float> out(pixels, INFINITY);
+  for (size_t i = 0; i < pixels && !tn.empty(); ++i) {
+    const Eigen::Vector3d t(tn[3 * i], tn[3 * i + 1], tn[3 * i + 2]);
+    const Eigen::Vector3f r(&ref.normals[3 * i]);
+    if (t.norm() > 0.5 && std::isfinite(ref.depth[i]))
+      out[i] = float(std::acos(std::min(1.0, std::abs(t.dot(r.cast<double>())) / t.norm())) * 180 / M_PI);
+  }
+  return out;
+}
+
+Status saveViewImages(const Options& o, const std::string& label, size_t v, const FrameResult& fr,
+                      const Reference* ref) {
+  const std::string stem = (std::filesystem::path(o.imagesDir) / (label + "_" + std::to_string(v))).string();
+  SA_RETURN_IF_ERROR(writePng(stem + ".png", fr.color));
+  SA_RETURN_IF_ERROR(writePfm(stem + ".pfm", fr.color.width, fr.color.height, fr.depth));
+  if (!ref) return Status::ok();
+  SA_RETURN_IF_ERROR(writePfm(stem + "_normal_error.pfm", fr.color.width, fr.color.height,
+                              normalErrorMap(fr.normals, ref->views[v], fr.depth.size())));
+  return writePng(stem + "_error.png",
+                  errorMap(fr.depth, ref->views[v].depth, fr.color.width, fr.color.height, ref->diag));
+}
+
+// Makes the --images folder and writes the reference's views into it.
+Status startImages(const Options& o, const Reference* ref) {
+  std::error_code ec;
+  std::filesystem::create_directories(o.imagesDir, ec);
+  if (ec) return Status::badInput(o.imagesDir + ": cannot create the --images folder: " + ec.message());
+  if (!ref) return Status::ok();
+  for (size_t v = 0; v < o.cams.size(); ++v) {
+    const std::string stem = (std::filesystem::path(o.imagesDir) / ("reference_" + std::to_string(v))).string();
+    SA_RETURN_IF_ERROR(writePng(stem + ".png", ref->shaded[v]));
+    SA_RETURN_IF_ERROR(writePfm(stem + ".pfm", o.cams[v].width, o.cams[v].height, ref->views[v].depth));
+  }
+  return Status::ok();
+}
+
 Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options& o, const Reference* ref,
                       const NearestSamples* samples, const RenderSettings& rs, Row& row) {
   std::vector<double> ms;
@@ -189,6 +269,7 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
     counted.countWork = parallax;
     SA_RETURN_IF_ERROR(renderer.render(o.cams[v], counted, fr, want));
     if (parallax) row.work.add(fr.stats.work);
+    if (!o.imagesDir.empty()) SA_RETURN_IF_ERROR(saveViewImages(o, fileLabel(row), v, fr, ref));
     ViewResult vr;
     vr.ms = ms[v];
     if (parallax) {
@@ -412,6 +493,10 @@ int runEval(const Args& a) {
     ref = std::make_unique<Reference>(std::move(*r));
     if (!o.quiet) std::fprintf(stderr, "eval: reference %s\n", ref->mesh.description.c_str());
   }
+  if (!o.imagesDir.empty()) {
+    s = startImages(o, ref.get());
+    if (!s) return reportError(s);
+  }
   std::unique_ptr<NearestSamples> samples;
   SourcePoints src;
   const bool needPoints = o.far || std::count(o.modes.begin(), o.modes.end(), RenderMode::kPoints) > 0;
@@ -480,7 +565,7 @@ int runEval(const Args& a) {
 int cmdEval(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "auto-pixels", "gdm-elsewhere", "repeat",
+                     {"reference", "max-edge", "path", "orbit", "zoom", "size", "fov", "up", "mode", "iterations", "slices", "auto-pixels", "gdm-elsewhere", "repeat", "images",
                       "csv", "plot"},
                      {"far", "json", "quiet", "help"}, {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {

@@ -21,6 +21,25 @@ struct CmdResult {
   std::string err;  // only from runErr
 };
 
+// A little-endian single-channel PFM's values (row order as stored); empty if unreadable.
+std::vector<float> readPfmForTest(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string magic;
+  int w = 0, h = 0;
+  double scale = 0;
+  in >> magic >> w >> h >> scale;
+  in.get();
+  if (magic != "Pf" || w <= 0 || h <= 0 || scale >= 0) return {};
+  std::vector<float> v(size_t(w) * h);
+  if (!in.read(reinterpret_cast<char*>(v.data()), std::streamsize(v.size() * 4))) return {};
+  return v;
+}
+
+size_t fileSize(const std::string& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  return in ? size_t(in.tellg()) : 0;
+}
+
 CmdResult run(const std::string& args) {
   const std::string cmd = std::string(SA_BINARY) + " " + args + " 2>/dev/null";
   std::FILE* p = popen(cmd.c_str(), "r");
@@ -195,6 +214,36 @@ TEST(Cli, PackInfoBenchEvalJson) {
     EXPECT_NEAR(c["depth_median"].get<double>(), par["depth_median"].get<double>(), 1e-9) << ref;
     EXPECT_FALSE(c["far"].is_null());
     EXPECT_LE(c["far"]["beyond3"].get<double>(), 0.001) << ref;
+  }
+  // --images: the files hold what was measured. Pixels only the render covers (finite in its depth,
+  // infinite in the reference's) are the JSON's only_render; normal errors exist where both cover.
+  {
+    CmdResult r = run("eval " + d.file("ico.hfa") + " --reference " + d.file("ico.ply") +
+                      " --orbit 2 --size 96x96 --mode parallax --iterations 12 --json --images " + d.file("imgs"));
+    ASSERT_EQ(r.code, 0) << r.out;
+    const auto c = nlohmann::json::parse(r.out)["configs"][0];
+    for (int v = 0; v < 2; ++v) {
+      const std::string stem = d.file("imgs/parallax-12_" + std::to_string(v));
+      const std::vector<float> test = readPfmForTest(stem + ".pfm"), ref = readPfmForTest(d.file("imgs/reference_" + std::to_string(v) + ".pfm"));
+      const std::vector<float> nerr = readPfmForTest(stem + "_normal_error.pfm");
+      ASSERT_EQ(test.size(), size_t(96 * 96));
+      ASSERT_EQ(ref.size(), test.size());
+      ASSERT_EQ(nerr.size(), test.size());
+      size_t onlyRender = 0, onlyRef = 0, both = 0, withNormal = 0;
+      for (size_t i = 0; i < test.size(); ++i) {
+        onlyRender += std::isfinite(test[i]) && !std::isfinite(ref[i]);
+        onlyRef += !std::isfinite(test[i]) && std::isfinite(ref[i]);
+        both += std::isfinite(test[i]) && std::isfinite(ref[i]);
+        withNormal += std::isfinite(nerr[i]);
+      }
+      EXPECT_EQ(onlyRender, c["per_view"][v]["only_render"].get<size_t>());
+      EXPECT_EQ(onlyRef, c["per_view"][v]["only_reference"].get<size_t>());
+      EXPECT_GT(both, 1000u);
+      EXPECT_EQ(withNormal, both);
+      for (const std::string& f : {stem + ".png", stem + "_error.png", d.file("imgs/reference_" + std::to_string(v) + ".png")})
+        EXPECT_GT(fileSize(f), 100u) << f;
+    }
+    EXPECT_EQ(run("eval " + d.file("ico.hfa") + " --orbit 1 --size 32x32 -q --images " + d.file("ico.ply")).code, 2);
   }
   auto fj = nlohmann::json::parse(run("eval " + d.file("ico.hfa") + " --orbit 2 --size 64x64 --json").out);
   EXPECT_TRUE(fj["reference"].is_null());
