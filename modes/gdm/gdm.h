@@ -3,9 +3,10 @@
 //
 // What is built: per forced cell a grid over its box (the cell's texel in u and v, the smaller of
 // the two in w) holding, at the voxels' corners, a signed distance to the surface of the cell's
-// SOURCE samples, never its height map: the implicit moving-least-squares surface of the oriented
-// samples (Kolluri 2008; Hoppe et al. 1992), f(x) = sum_i w_i (x - p_i) . n_i / sum_i w_i with
-// Gaussian weights one sample spacing wide, negative inside. Corners farther than a band of about
+// SOURCE samples, never its height map, negative inside: for points, the distance to the algebraic
+// sphere fitted to the oriented samples around the corner (APSS, Guennebaud & Gross 2007), for
+// triangles' samples the implicit moving-least-squares field (Kolluri 2008; Hoppe et al. 1992),
+// f(x) = sum_i w_i (x - p_i) . n_i / sum_i w_i; Gaussian weights a sample spacing wide or more. Corners farther than a band of about
 // two spacings from every sample are unknown (nothing is invented far from the data). The surface
 // is where the trilinear interpolation of the corners is zero: continuous from voxel to voxel,
 // both sides of thin parts apart (their normals face away from each other), the noise of merged
@@ -76,8 +77,9 @@ struct Samples {
 // Builds a cell's grid from its samples (those without a normal are left out); spacing: the
 // sample spacing of points, 0 for samples taken densely from triangles. The kernel is a spacing
 // wide, widened (up to kMaxKernel) where the samples' noise about the field is large, until the
-// field keeps kFieldNoise spacings of it (CellGrid::kernel says how wide).
-inline constexpr double kFieldNoise = 0.03, kMaxKernel = 3;
+// field keeps kFieldNoise spacings of it (CellGrid::kernel says how wide). Points fit spheres, whose
+// surface stays on a curved part however wide the kernel (a plane's bulges out by h^2 / 2R).
+inline constexpr double kFieldNoise = 0.02, kMaxKernel = 3;
 CellGrid buildGrid(const CellRecord& c, uint32_t cell, const Samples& s, double spacing);
 
 // First crossing of the surface along o + t d (frame), t in [t0, t1], either way (a camera inside a

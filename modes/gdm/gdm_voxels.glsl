@@ -2,8 +2,8 @@
 // the DDA that finds the first crossing of the surface along a ray (gdm.cpp walk). Shared by
 // gdm.glsl and the slices mode (forced cells' slices are opaque where this walk meets the surface).
 // The surface is the zero set of the trilinear interpolation of a signed distance stored at the
-// voxels' corners (the implicit moving-least-squares surface of the cell's source samples,
-// Kolluri 2008), negative inside; a hit is where the ray crosses it, either way (a camera inside a
+// voxels' corners (the cell's source samples' algebraic spheres for points, APSS; their implicit
+// moving-least-squares surface for triangles, Kolluri 2008), negative inside; a hit is where the ray crosses it, either way (a camera inside a
 // thin part sees its walls), shaded with the side that faces the ray.
 layout(std430, binding = 6) readonly buffer GdmEntries { uint gdmEntry[]; };  // block of each cell, ~0u: none
 layout(std430, binding = 7) readonly buffer GdmWords { uint gdmWord[]; };
