@@ -33,6 +33,11 @@ for m in bunny dragon; do
   echo "== eval $m" >&2
   $sa eval "$out/$m.hfa" --reference "${ref[$m]}" --orbit 8 --size "${size}x${size}" --repeat 1 --mode parallax,exact,vdm,gdm,slices --slices "$slices" \
       --iterations 12,64 --csv "$out/eval_$m.csv" --plot "$out/tradeoff_$m.png" --json > "$out/eval_$m.json"
+  # gdm where cells are forced, parallax's own programs elsewhere (--gdm-elsewhere parallax)
+  $sa bench "$out/$m.hfa" --orbit 8 --size "${size}x${size}" --warmup 2 --frames 16 --mode gdm --gdm-elsewhere parallax \
+      --iterations 12 --json > "$out/bench_gp_$m.json"
+  $sa eval "$out/$m.hfa" --reference "${ref[$m]}" --orbit 8 --size "${size}x${size}" --repeat 1 --mode gdm --gdm-elsewhere parallax \
+      --iterations 12 --json > "$out/eval_gp_$m.json"
 done
 /usr/bin/python3 - "$out" "$slices" <<'PY' > "$out/table.md"
 import json, sys
@@ -48,11 +53,17 @@ for m in ("bunny", "dragon"):
     print("| mode | iters (slices) | section MiB | B/texel | GPU MiB (mode) | bake s | frame ms | IoU | depth med % | depth p95 % "
           "| normal deg | work/ray mean (p99) | lookups falling back |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for c in bench["configs"]:
+    gp_bench = json.load(open(f"{out}/bench_gp_{m}.json"))["configs"]
+    gp_eval = json.load(open(f"{out}/eval_gp_{m}.json"))["configs"]
+    for c in gp_bench:
+        c["mode"] = c["drawn_mode"] = "gdm+parallax"
+    ev["configs"] += gp_eval
+    for c in bench["configs"] + gp_bench:
         name = c["mode"]
-        it = c["iterations"] if name == "parallax" else "-"
-        e = next((r for r in ev["configs"] if r["mode"] == c["drawn_mode"] and (name != "parallax" or r["iterations"] == c["iterations"])), None)
-        sec = modes.get(name, {})
+        stepped = name in ("parallax", "gdm+parallax")
+        it = c["iterations"] if stepped else "-"
+        e = next((r for r in ev["configs"] if r["mode"] == c["drawn_mode"] and (not stepped or r["iterations"] == c["iterations"])), None)
+        sec = modes.get(name.split("+")[0], {})
         mib = c["mode_disk_bytes"] / 2**20
         w = c.get("work", {})
         fb = f"{100 * w['fallbacks'] / w['lookups']:.1f} %" if w.get("lookups") else "-"
