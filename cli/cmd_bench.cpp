@@ -298,6 +298,104 @@ std::string budgetErrorJson(const BudgetError& e) {
   return b;
 }
 
+// The settings every configuration starts from: the modes' options and the skip switches.
+Status baseSettings(const Args& a, RenderSettings& base) {
+  SA_RETURN_IF_ERROR(modeSettingsFromArgs(a, base));
+  base.useColor = !a.flag("no-color");
+  base.grooveAA = !a.flag("no-groove-aa");
+  base.cull.frustum = !a.flag("no-frustum-cull");
+  base.cull.backfaceCull = !a.flag("no-backface-cull");
+  base.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
+  base.cull.subpixelSplats = !a.flag("no-splats");
+  base.cull.frontToBack = !a.flag("no-sort");
+  return Status::ok();
+}
+
+// One configuration per mode (per --iterations where the mode marches), then with
+// --compare-skips each skip turned off alone, all of them, and the level-of-detail switch.
+std::vector<Config> makeConfigs(const RenderSettings& base, const std::vector<RenderMode>& modes,
+                                const std::vector<int>& iters, bool compareSkips) {
+  std::vector<Config> configs;
+  for (RenderMode m : modes) {
+    if (m == RenderMode::kPoints) {
+      Config c{base, "-"};
+      c.settings.mode = m;
+      configs.push_back(c);
+      continue;
+    }
+    for (int it : iters) {
+      Config c{base, "all"};
+      c.settings.mode = m;
+      c.settings.iterations = it;
+      configs.push_back(c);
+      // No linear steps: one configuration (gdm has them where its height-field cells take parallax).
+      if (m != RenderMode::kParallax && !(m == RenderMode::kGdm && base.gdmParallaxElsewhere)) break;
+    }
+  }
+  if (compareSkips) {
+    const int it = iters.back();
+    auto off = [&](const char* label, auto edit) {
+      Config c{base, label};
+      c.settings.iterations = it;
+      edit(c.settings.cull);
+      configs.push_back(c);
+    };
+    off("no-frustum-cull", [](CullOptions& o) { o.frustum = false; });
+    off("no-backface-cull", [](CullOptions& o) { o.backfaceCull = false; });
+    off("no-adaptive-steps", [](CullOptions& o) { o.adaptiveSteps = false; });
+    off("no-splats", [](CullOptions& o) { o.subpixelSplats = false; });
+    off("no-sort", [](CullOptions& o) { o.frontToBack = false; });
+    off("none", [](CullOptions& o) {
+      o.frustum = o.backfaceCull = o.adaptiveSteps = o.subpixelSplats = o.frontToBack = false;
+    });
+    // What the level-of-detail switch saves: parallax with boxes under --auto-pixels as slices.
+    Config lod{base, "all+auto-slices"};
+    lod.settings.mode = RenderMode::kAuto;
+    lod.settings.iterations = it;
+    configs.push_back(lod);
+  }
+  return configs;
+}
+
+// Every configuration's frames (on a terminal a bar with the time left): its CSV rows, its JSON
+// object and its table row.
+Status runConfigs(Renderer& renderer, const PackReader& pack, const std::vector<Camera>& cams,
+                  const std::vector<Config>& configs, int64_t warmup, int64_t frames, bool quiet, bool budgeted,
+                  std::ostringstream& csv, std::ostringstream& json, std::vector<Row>& rows) {
+  Progress progress(!quiet, "bench", "frames");
+  const uint64_t totalFrames = uint64_t(frames + warmup) * configs.size();
+  uint64_t framesDone = 0;
+  for (size_t ci = 0; ci < configs.size(); ++ci) {
+    Row row;
+    SA_RETURN_IF_ERROR(benchConfig(renderer, cams, configs[ci], ci, warmup, frames, csv, row, [&] {
+      progress("frames", ++framesDone, totalFrames);
+    }));
+    rows.push_back(row);
+    json << (ci ? ", " : "") << rowJson(row, renderer, pack, budgeted);
+  }
+  progress.finish();
+  return Status::ok();
+}
+
+void printStream(const StreamReport& r, uint32_t cells) {
+  std::fprintf(stderr,
+               "bench: streamed: pack opened in %.1f ms, GL ready at %.1f ms, first frame at %.1f ms, every visible cell drawn at %.1f ms "
+               "(%llu frames, %u of %u tiles resident)\n",
+               r.openMs, r.initMs, r.firstFrameMs, r.viewCompleteMs, (unsigned long long)r.frames, r.tilesResident, cells);
+}
+
+// --budget-error: the budget's image error against an unlimited render, on stderr and in the JSON.
+Status addBudgetError(Renderer& renderer, const std::string& packPath, const std::vector<Camera>& cams,
+                      const RenderSettings& rs, bool quiet, std::ostringstream& json) {
+  BudgetError be;
+  SA_RETURN_IF_ERROR(measureBudgetError(renderer, packPath, cams, rs, !quiet, be));
+  if (!quiet)
+    std::fprintf(stderr, "bench: budget error over %zu views: IoU mean %.4f, min %.4f; depth error median at most %.3f texels (p95 at most %.3f)\n",
+                 be.views, be.iouMean, be.iouMin, be.depthMedianMax, be.depthP95Max);
+  json << ", \"budget_error\": " << budgetErrorJson(be);
+  return Status::ok();
+}
+
 }  // namespace
 
 int cmdBench(int argc, char** argv) {
@@ -340,54 +438,9 @@ int cmdBench(int argc, char** argv) {
   s = modesAndIterations(a, modes, iters);
   if (!s) return reportError(s);
   RenderSettings base;
-  s = modeSettingsFromArgs(a, base);
+  s = baseSettings(a, base);
   if (!s) return reportError(s);
-  base.useColor = !a.flag("no-color");
-  base.grooveAA = !a.flag("no-groove-aa");
-  base.cull.frustum = !a.flag("no-frustum-cull");
-  base.cull.backfaceCull = !a.flag("no-backface-cull");
-  base.cull.adaptiveSteps = !a.flag("no-adaptive-steps");
-  base.cull.subpixelSplats = !a.flag("no-splats");
-  base.cull.frontToBack = !a.flag("no-sort");
-  std::vector<Config> configs;
-  for (RenderMode m : modes) {
-    if (m == RenderMode::kPoints) {
-      Config c{base, "-"};
-      c.settings.mode = m;
-      configs.push_back(c);
-      continue;
-    }
-    for (int it : iters) {
-      Config c{base, "all"};
-      c.settings.mode = m;
-      c.settings.iterations = it;
-      configs.push_back(c);
-      // No linear steps: one configuration (gdm has them where its height-field cells take parallax).
-      if (m != RenderMode::kParallax && !(m == RenderMode::kGdm && base.gdmParallaxElsewhere)) break;
-    }
-  }
-  if (a.flag("compare-skips")) {
-    const int it = iters.back();
-    auto off = [&](const char* label, auto edit) {
-      Config c{base, label};
-      c.settings.iterations = it;
-      edit(c.settings.cull);
-      configs.push_back(c);
-    };
-    off("no-frustum-cull", [](CullOptions& o) { o.frustum = false; });
-    off("no-backface-cull", [](CullOptions& o) { o.backfaceCull = false; });
-    off("no-adaptive-steps", [](CullOptions& o) { o.adaptiveSteps = false; });
-    off("no-splats", [](CullOptions& o) { o.subpixelSplats = false; });
-    off("no-sort", [](CullOptions& o) { o.frontToBack = false; });
-    off("none", [](CullOptions& o) {
-      o.frustum = o.backfaceCull = o.adaptiveSteps = o.subpixelSplats = o.frontToBack = false;
-    });
-    // What the level-of-detail switch saves: parallax with boxes under --auto-pixels as slices.
-    Config lod{base, "all+auto-slices"};
-    lod.settings.mode = RenderMode::kAuto;
-    lod.settings.iterations = it;
-    configs.push_back(lod);
-  }
+  const std::vector<Config> configs = makeConfigs(base, modes, iters, a.flag("compare-skips"));
 
   EglContext ctx;
   s = ctx.init();
@@ -404,12 +457,7 @@ int cmdBench(int argc, char** argv) {
   if (a.flag("stream")) {
     s = streamFirstView(renderer, cams[0], configs[0].settings, t0, streamed);
     if (!s) return reportError(s);
-    if (!quiet)
-      std::fprintf(stderr,
-                   "bench: streamed: pack opened in %.1f ms, GL ready at %.1f ms, first frame at %.1f ms, every visible cell drawn at %.1f ms "
-                   "(%llu frames, %u of %u tiles resident)\n",
-                   streamed.openMs, streamed.initMs, streamed.firstFrameMs, streamed.viewCompleteMs, (unsigned long long)streamed.frames,
-                   streamed.tilesResident, pack.meta().cellCount);
+    if (!quiet) printStream(streamed, pack.meta().cellCount);
   }
   for (RenderMode m : modes) warnIfModeFallsBack(renderer, pack, m);
   if (std::find(modes.begin(), modes.end(), RenderMode::kPoints) != modes.end()) {
@@ -427,31 +475,14 @@ int cmdBench(int argc, char** argv) {
   if (budget.bytes) json << ", \"gpu_budget\": " << budget.bytes << ", \"gpu_budget_default\": " << (budget.automatic ? "true" : "false");
   if (a.flag("stream")) json << ", \"stream\": " << streamJson(streamed, pack.meta().cellCount);
   json << ", \"configs\": [";
-  // Frames of every configuration, on a terminal as a bar with the time left.
-  Progress progress(!quiet, "bench", "frames");
-  const uint64_t totalFrames = uint64_t(*frames + *warmup) * configs.size();
-  uint64_t framesDone = 0;
   std::vector<Row> rows;
-  for (size_t ci = 0; ci < configs.size(); ++ci) {
-    Row row;
-    s = benchConfig(renderer, cams, configs[ci], ci, *warmup, *frames, csv, row, [&] {
-      progress("frames", ++framesDone, totalFrames);
-    });
-    if (!s) return reportError(s);
-    rows.push_back(row);
-    json << (ci ? ", " : "") << rowJson(row, renderer, pack, budget.bytes > 0);
-  }
-  progress.finish();
+  s = runConfigs(renderer, pack, cams, configs, *warmup, *frames, quiet, budget.bytes > 0, csv, json, rows);
+  if (!s) return reportError(s);
   if (!quiet) printTable(rows, ctx.renderer());
   json << "]";
   if (a.flag("budget-error")) {
-    BudgetError be;
-    s = measureBudgetError(renderer, a.positionals()[0], cams, configs[0].settings, !quiet, be);
+    s = addBudgetError(renderer, a.positionals()[0], cams, configs[0].settings, quiet, json);
     if (!s) return reportError(s);
-    if (!quiet)
-      std::fprintf(stderr, "bench: budget error over %zu views: IoU mean %.4f, min %.4f; depth error median at most %.3f texels (p95 at most %.3f)\n",
-                   be.views, be.iouMean, be.iouMin, be.depthMedianMax, be.depthP95Max);
-    json << ", \"budget_error\": " << budgetErrorJson(be);
   }
   json << "}\n";
   if (a.has("csv")) {
