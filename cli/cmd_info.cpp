@@ -171,6 +171,163 @@ int infoInputs(const std::vector<std::string>& paths, const std::string& columns
 
 }  // namespace
 
+// What info reports of a pack beyond its metadata: cells per level, their texels, page use.
+struct PackSummary {
+  std::map<int, uint32_t> perLevel;
+  std::map<int, std::vector<double>> texelsPerLevel;  // each cell's texel: its box over its tile
+  uint32_t forced = 0, degenerate = 0;
+  uint64_t tileTexels = 0, pageTexels = 0;
+  const char* upSource = "";
+  double bmin[3], bmax[3];
+  TexelNote tn;
+};
+
+const char* kPhases[6] = {"count", "distribute", "octree", "heightmaps", "write", "total"};
+
+PackSummary summarize(const PackReader& pack) {
+  const PackMeta& m = pack.meta();
+  PackSummary r;
+  for (const CellRecord& c : pack.cells()) {
+    ++r.perLevel[c.level];
+    r.texelsPerLevel[c.level].push_back((c.box[1] - c.box[0]) / std::max<uint16_t>(1, c.tileW));
+    r.forced += (c.flags & kCellForced) != 0;
+    r.degenerate += (c.flags & kCellDegenerate) != 0;
+    r.tileTexels += uint64_t(c.tileW) * c.tileH;
+  }
+  r.pageTexels = pack.pageTexels() * m.pageCount;
+  const char* upFrom[4] = {"unknown", "given", "format convention", "estimated from the data"};
+  r.upSource = upFrom[std::min<uint32_t>(m.upSource, 3)];
+  for (int i = 0; i < 3; ++i) {
+    r.bmin[i] = m.origin[i] + m.boundsMin[i];
+    r.bmax[i] = m.origin[i] + m.boundsMax[i];
+  }
+  r.tn = texelNote(pack.note());
+  return r;
+}
+
+void printPackJson(const PackReader& pack, const PackSummary& sum) {
+  const PackMeta& m = pack.meta();
+  std::printf("{\"file\": \"%s\", \"bytes\": %llu, \"cells\": %u, \"forced_cells\": %u, \"degenerate_cells\": %u, "
+              "\"levels\": {",
+              jsonEscape(pack.path()).c_str(), (unsigned long long)pack.fileBytes(), m.cellCount, sum.forced, sum.degenerate);
+  bool first = true;
+  for (auto [l, n] : sum.perLevel) {
+    std::printf("%s\"%d\": %u", first ? "" : ", ", l, n);
+    first = false;
+  }
+  std::printf("}, \"texel_per_level\": {");
+  first = true;
+  for (auto& [l, t] : sum.texelsPerLevel) {
+    const TexelRange r = texelRange(t);
+    std::printf("%s\"%d\": [%.6g, %.6g, %.6g]", first ? "" : ", ", l, r.min, r.median, r.max);
+    first = false;
+  }
+  std::printf("}, \"texels\": %llu, \"page_width\": %u, \"page_height\": %u, \"pages\": %u, \"atlas_occupancy\": %.4f, "
+              "\"texel_size\": %.9g, \"sample_spacing\": %.9g, \"source_points\": %llu, \"skipped_points\": %llu, "
+              "\"outliers_removed\": %llu, \"source_triangles\": %llu, \"color\": %s, \"normals\": %s, "
+              "\"up\": [%.9g, %.9g, %.9g], \"up_source\": \"%s\", \"bytes_per_point\": %.3f, "
+              "\"origin\": [%.17g, %.17g, %.17g], \"bounds_min\": [%.17g, %.17g, %.17g], "
+              "\"bounds_max\": [%.17g, %.17g, %.17g], \"seconds\": {",
+              (unsigned long long)sum.tileTexels, m.pageWidth, m.pageHeight, m.pageCount, double(sum.tileTexels) / double(sum.pageTexels),
+              m.texelSize, m.sampleSpacing, (unsigned long long)m.sourcePoints, (unsigned long long)m.skippedPoints,
+              (unsigned long long)m.outliersRemoved, (unsigned long long)m.sourceTriangles,
+              pack.hasColor() ? "true" : "false", pack.hasNormals() ? "true" : "false", m.up[0], m.up[1], m.up[2],
+              sum.upSource,
+              double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)), m.origin[0], m.origin[1],
+              m.origin[2], sum.bmin[0], sum.bmin[1], sum.bmin[2], sum.bmax[0], sum.bmax[1], sum.bmax[2]);
+  for (int i = 0; i < 6; ++i) std::printf("%s\"%s\": %.3f", i ? ", " : "", kPhases[i], m.seconds[i]);
+  std::printf("}, \"texel_wanted\": ");
+  if (sum.tn.present) std::printf("%.9g", sum.tn.wanted);
+  else std::printf("null");
+  std::string capJson = "null";
+  if (!sum.tn.cap.empty()) capJson = '"' + jsonEscape(sum.tn.cap) + '"';
+  std::printf(", \"texel_capped_by\": %s", capJson.c_str());
+  std::printf(", \"pages_compressed\": %s, \"page_bytes\": {", pack.compressedPages() ? "true" : "false");
+  first = true;
+  for (const PageBytes& b : pageBytes(pack)) {
+    std::printf("%s\"%s\": {\"stored\": %llu, \"raw\": %llu}", first ? "" : ", ", b.name,
+                (unsigned long long)b.stored, (unsigned long long)b.raw);
+    first = false;
+  }
+  std::printf("}");
+  std::printf(", \"modes\": [");
+  bool firstMode = true;
+  for (const ModeInfo& mi : allModes()) {
+    const ModeSection ms = modeSection(pack, mi.mode);
+    std::string section = "null";
+    if (mi.sectionId) section = '"' + std::string(mi.sectionId, 4) + '"';
+    std::printf("%s{\"mode\": \"%s\", \"section\": %s, \"present\": %s, \"bytes\": %llu, \"bake_s\": %.3f}",
+                firstMode ? "" : ", ", mi.name, section.c_str(),
+                !ms.needed || ms.present ? "true" : "false", (unsigned long long)ms.bytes, ms.bakeSeconds);
+    firstMode = false;
+  }
+  std::printf("]}\n");
+}
+
+void printPackText(const PackReader& pack, const PackSummary& sum) {
+  const PackMeta& m = pack.meta();
+  std::printf("pack      %s (%.2f MiB, format version %u)\n", pack.path().c_str(), pack.fileBytes() / 1048576.0,
+              kPackVersion);
+  std::printf("source    %llu points (%llu NaN/Inf skipped, %llu outliers removed), %llu triangles, %s, %s, %s\n",
+              (unsigned long long)m.sourcePoints, (unsigned long long)m.skippedPoints,
+              (unsigned long long)m.outliersRemoved, (unsigned long long)m.sourceTriangles,
+              (m.flags & kPackFromTriangles) ? "heights rasterized" : "heights by pull-push",
+              pack.hasNormals() ? "stored normals" : "normals from height gradients",
+              pack.hasColor() ? "with colour" : "no colour");
+  std::printf("up        %.4g, %.4g, %.4g (%s)\n", m.up[0], m.up[1], m.up[2], sum.upSource);
+  std::printf("bounds    [%.6f, %.6f, %.6f] .. [%.6f, %.6f, %.6f]\n", sum.bmin[0], sum.bmin[1], sum.bmin[2], sum.bmax[0], sum.bmax[1], sum.bmax[2]);
+  std::printf("cells     %u (%u forced, %u degenerate), %u chunk(s)\n", m.cellCount, sum.forced, sum.degenerate, m.chunkCount);
+  std::printf("levels   ");
+  for (auto [l, n] : sum.perLevel) std::printf(" L%d:%u", l, n);
+  std::printf("\n");
+  std::printf("resolution");
+  for (auto& [l, t] : sum.texelsPerLevel) std::printf(" L%d:%.4g", l, texelRange(t).median);
+  std::printf(" (median texel per octree level");
+  std::vector<double> all;
+  for (auto& [l, t] : sum.texelsPerLevel) all.insert(all.end(), t.begin(), t.end());
+  const TexelRange whole = texelRange(all);
+  std::printf("; %.4g-%.4g over cells)\n", whole.min, whole.max);
+  std::printf("texels    %llu in %u page(s) of %ux%u (occupancy %.1f%%), texel %.4g, sample spacing %.4g\n",
+              (unsigned long long)sum.tileTexels, m.pageCount, m.pageWidth, m.pageHeight, 100.0 * double(sum.tileTexels) / double(sum.pageTexels),
+              m.texelSize, m.sampleSpacing);
+  if (!sum.tn.cap.empty())
+    std::printf("detail    LOST: texels %.2fx coarser than the data's %.4g, capped by %s (repack with a larger --texels)\n",
+                m.texelSize / sum.tn.wanted, sum.tn.wanted, sum.tn.cap.c_str());
+  else if (sum.tn.present)
+    std::printf("detail    full: the texels are the data's (median %.4g: half each cell's area spacing, or --texel-size)\n",
+                sum.tn.wanted);
+  std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
+  std::printf("pages    ");
+  uint64_t stored = 0, raw = 0;
+  for (const PageBytes& b : pageBytes(pack)) {
+    std::printf(" %s %.2f MiB (%.2fx)", b.name, double(b.stored) / 1048576.0, double(b.raw) / double(std::max<uint64_t>(1, b.stored)));
+    stored += b.stored;
+    raw += b.raw;
+  }
+  if (pack.compressedPages())
+    std::printf("; coded per tile, %.2fx smaller than raw pages (%.2f MiB)\n", double(raw) / double(std::max<uint64_t>(1, stored)),
+                double(raw) / 1048576.0);
+  else
+    std::printf("; raw (packed with --raw-pages or before compression)\n");
+  std::printf("timings  ");
+  if (m.seconds[5] == 0) std::printf(" not recorded (packed with --reproducible)");
+  for (int i = 0; i < 6 && m.seconds[5] != 0; ++i)
+    if (i != 4) std::printf(" %s %.2fs", kPhases[i], m.seconds[i]);
+  std::printf("\n");
+  for (const ModeInfo& mi : allModes()) {
+    const ModeSection ms = modeSection(pack, mi.mode);
+    if (!ms.needed) std::printf("mode      %-9s ready (needs nothing baked)\n", mi.name);
+    else if (!ms.problem.empty())
+      std::printf("mode      %-9s unusable, draws %s: %s\n", mi.name, mi.fallback, ms.problem.c_str());
+    else if (ms.present)
+      std::printf("mode      %-9s section %.4s, %.2f MiB (%.2f bytes/texel), baked in %.2fs\n", mi.name, mi.sectionId,
+                  double(ms.bytes) / 1048576.0, double(ms.bytes) / double(std::max<uint64_t>(1, sum.tileTexels)), ms.bakeSeconds);
+    else
+      std::printf("mode      %-9s not baked: draws %s (scanatlas bake %s --mode %s)\n", mi.name, mi.fallback,
+                  pack.path().c_str(), mi.name);
+  }
+}
+
 int cmdInfo(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv, {"columns"}, {"json", "help"}, {{"h", "help"}});
@@ -193,146 +350,9 @@ int cmdInfo(int argc, char** argv) {
   PackReader pack;
   s = pack.open(a.positionals()[0], PageLoad::kNone);  // metadata only: compressed pages stay coded
   if (!s) return reportError(s);
-  const PackMeta& m = pack.meta();
-  std::map<int, uint32_t> perLevel;
-  std::map<int, std::vector<double>> texelsPerLevel;  // each cell's texel: its box over its tile
-  uint32_t forced = 0, degenerate = 0;
-  uint64_t tileTexels = 0;
-  for (const CellRecord& c : pack.cells()) {
-    ++perLevel[c.level];
-    texelsPerLevel[c.level].push_back((c.box[1] - c.box[0]) / std::max<uint16_t>(1, c.tileW));
-    forced += (c.flags & kCellForced) != 0;
-    degenerate += (c.flags & kCellDegenerate) != 0;
-    tileTexels += uint64_t(c.tileW) * c.tileH;
-  }
-  const uint64_t pageTexels = pack.pageTexels() * m.pageCount;
-  const char* upFrom[4] = {"unknown", "given", "format convention", "estimated from the data"};
-  const char* upSource = upFrom[std::min<uint32_t>(m.upSource, 3)];
-  double bmin[3], bmax[3];
-  for (int i = 0; i < 3; ++i) {
-    bmin[i] = m.origin[i] + m.boundsMin[i];
-    bmax[i] = m.origin[i] + m.boundsMax[i];
-  }
-  const char* phases[6] = {"count", "distribute", "octree", "heightmaps", "write", "total"};
-  const TexelNote tn = texelNote(pack.note());
-  if (a.flag("json")) {
-    std::printf("{\"file\": \"%s\", \"bytes\": %llu, \"cells\": %u, \"forced_cells\": %u, \"degenerate_cells\": %u, "
-                "\"levels\": {",
-                jsonEscape(pack.path()).c_str(), (unsigned long long)pack.fileBytes(), m.cellCount, forced, degenerate);
-    bool first = true;
-    for (auto [l, n] : perLevel) {
-      std::printf("%s\"%d\": %u", first ? "" : ", ", l, n);
-      first = false;
-    }
-    std::printf("}, \"texel_per_level\": {");
-    first = true;
-    for (auto& [l, t] : texelsPerLevel) {
-      const TexelRange r = texelRange(t);
-      std::printf("%s\"%d\": [%.6g, %.6g, %.6g]", first ? "" : ", ", l, r.min, r.median, r.max);
-      first = false;
-    }
-    std::printf("}, \"texels\": %llu, \"page_width\": %u, \"page_height\": %u, \"pages\": %u, \"atlas_occupancy\": %.4f, "
-                "\"texel_size\": %.9g, \"sample_spacing\": %.9g, \"source_points\": %llu, \"skipped_points\": %llu, "
-                "\"outliers_removed\": %llu, \"source_triangles\": %llu, \"color\": %s, \"normals\": %s, "
-                "\"up\": [%.9g, %.9g, %.9g], \"up_source\": \"%s\", \"bytes_per_point\": %.3f, "
-                "\"origin\": [%.17g, %.17g, %.17g], \"bounds_min\": [%.17g, %.17g, %.17g], "
-                "\"bounds_max\": [%.17g, %.17g, %.17g], \"seconds\": {",
-                (unsigned long long)tileTexels, m.pageWidth, m.pageHeight, m.pageCount, double(tileTexels) / double(pageTexels),
-                m.texelSize, m.sampleSpacing, (unsigned long long)m.sourcePoints, (unsigned long long)m.skippedPoints,
-                (unsigned long long)m.outliersRemoved, (unsigned long long)m.sourceTriangles,
-                pack.hasColor() ? "true" : "false", pack.hasNormals() ? "true" : "false", m.up[0], m.up[1], m.up[2],
-                upSource,
-                double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)), m.origin[0], m.origin[1],
-                m.origin[2], bmin[0], bmin[1], bmin[2], bmax[0], bmax[1], bmax[2]);
-    for (int i = 0; i < 6; ++i) std::printf("%s\"%s\": %.3f", i ? ", " : "", phases[i], m.seconds[i]);
-    std::printf("}, \"texel_wanted\": ");
-    if (tn.present) std::printf("%.9g", tn.wanted);
-    else std::printf("null");
-    std::string capJson = "null";
-    if (!tn.cap.empty()) capJson = '"' + jsonEscape(tn.cap) + '"';
-    std::printf(", \"texel_capped_by\": %s", capJson.c_str());
-    std::printf(", \"pages_compressed\": %s, \"page_bytes\": {", pack.compressedPages() ? "true" : "false");
-    first = true;
-    for (const PageBytes& b : pageBytes(pack)) {
-      std::printf("%s\"%s\": {\"stored\": %llu, \"raw\": %llu}", first ? "" : ", ", b.name,
-                  (unsigned long long)b.stored, (unsigned long long)b.raw);
-      first = false;
-    }
-    std::printf("}");
-    std::printf(", \"modes\": [");
-    bool firstMode = true;
-    for (const ModeInfo& mi : allModes()) {
-      const ModeSection ms = modeSection(pack, mi.mode);
-      std::string section = "null";
-      if (mi.sectionId) section = '"' + std::string(mi.sectionId, 4) + '"';
-      std::printf("%s{\"mode\": \"%s\", \"section\": %s, \"present\": %s, \"bytes\": %llu, \"bake_s\": %.3f}",
-                  firstMode ? "" : ", ", mi.name, section.c_str(),
-                  !ms.needed || ms.present ? "true" : "false", (unsigned long long)ms.bytes, ms.bakeSeconds);
-      firstMode = false;
-    }
-    std::printf("]}\n");
-    return 0;
-  }
-  std::printf("pack      %s (%.2f MiB, format version %u)\n", pack.path().c_str(), pack.fileBytes() / 1048576.0,
-              kPackVersion);
-  std::printf("source    %llu points (%llu NaN/Inf skipped, %llu outliers removed), %llu triangles, %s, %s, %s\n",
-              (unsigned long long)m.sourcePoints, (unsigned long long)m.skippedPoints,
-              (unsigned long long)m.outliersRemoved, (unsigned long long)m.sourceTriangles,
-              (m.flags & kPackFromTriangles) ? "heights rasterized" : "heights by pull-push",
-              pack.hasNormals() ? "stored normals" : "normals from height gradients",
-              pack.hasColor() ? "with colour" : "no colour");
-  std::printf("up        %.4g, %.4g, %.4g (%s)\n", m.up[0], m.up[1], m.up[2], upSource);
-  std::printf("bounds    [%.6f, %.6f, %.6f] .. [%.6f, %.6f, %.6f]\n", bmin[0], bmin[1], bmin[2], bmax[0], bmax[1], bmax[2]);
-  std::printf("cells     %u (%u forced, %u degenerate), %u chunk(s)\n", m.cellCount, forced, degenerate, m.chunkCount);
-  std::printf("levels   ");
-  for (auto [l, n] : perLevel) std::printf(" L%d:%u", l, n);
-  std::printf("\n");
-  std::printf("resolution");
-  for (auto& [l, t] : texelsPerLevel) std::printf(" L%d:%.4g", l, texelRange(t).median);
-  std::printf(" (median texel per octree level");
-  std::vector<double> all;
-  for (auto& [l, t] : texelsPerLevel) all.insert(all.end(), t.begin(), t.end());
-  const TexelRange whole = texelRange(all);
-  std::printf("; %.4g-%.4g over cells)\n", whole.min, whole.max);
-  std::printf("texels    %llu in %u page(s) of %ux%u (occupancy %.1f%%), texel %.4g, sample spacing %.4g\n",
-              (unsigned long long)tileTexels, m.pageCount, m.pageWidth, m.pageHeight, 100.0 * double(tileTexels) / double(pageTexels),
-              m.texelSize, m.sampleSpacing);
-  if (!tn.cap.empty())
-    std::printf("detail    LOST: texels %.2fx coarser than the data's %.4g, capped by %s (repack with a larger --texels)\n",
-                m.texelSize / tn.wanted, tn.wanted, tn.cap.c_str());
-  else if (tn.present)
-    std::printf("detail    full: the texels are the data's (median %.4g: half each cell's area spacing, or --texel-size)\n",
-                tn.wanted);
-  std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
-  std::printf("pages    ");
-  uint64_t stored = 0, raw = 0;
-  for (const PageBytes& b : pageBytes(pack)) {
-    std::printf(" %s %.2f MiB (%.2fx)", b.name, double(b.stored) / 1048576.0, double(b.raw) / double(std::max<uint64_t>(1, b.stored)));
-    stored += b.stored;
-    raw += b.raw;
-  }
-  if (pack.compressedPages())
-    std::printf("; coded per tile, %.2fx smaller than raw pages (%.2f MiB)\n", double(raw) / double(std::max<uint64_t>(1, stored)),
-                double(raw) / 1048576.0);
-  else
-    std::printf("; raw (packed with --raw-pages or before compression)\n");
-  std::printf("timings  ");
-  if (m.seconds[5] == 0) std::printf(" not recorded (packed with --reproducible)");
-  for (int i = 0; i < 6 && m.seconds[5] != 0; ++i)
-    if (i != 4) std::printf(" %s %.2fs", phases[i], m.seconds[i]);
-  std::printf("\n");
-  for (const ModeInfo& mi : allModes()) {
-    const ModeSection ms = modeSection(pack, mi.mode);
-    if (!ms.needed) std::printf("mode      %-9s ready (needs nothing baked)\n", mi.name);
-    else if (!ms.problem.empty())
-      std::printf("mode      %-9s unusable, draws %s: %s\n", mi.name, mi.fallback, ms.problem.c_str());
-    else if (ms.present)
-      std::printf("mode      %-9s section %.4s, %.2f MiB (%.2f bytes/texel), baked in %.2fs\n", mi.name, mi.sectionId,
-                  double(ms.bytes) / 1048576.0, double(ms.bytes) / double(std::max<uint64_t>(1, tileTexels)), ms.bakeSeconds);
-    else
-      std::printf("mode      %-9s not baked: draws %s (scanatlas bake %s --mode %s)\n", mi.name, mi.fallback,
-                  pack.path().c_str(), mi.name);
-  }
+  const PackSummary summary = summarize(pack);
+  if (a.flag("json")) printPackJson(pack, summary);
+  else printPackText(pack, summary);
   return 0;
 }
 
