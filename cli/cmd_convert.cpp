@@ -99,6 +99,113 @@ class Filter : public BatchSink {
   uint64_t skipped_ = 0, read_ = 0, droppedTriangles_ = 0;
 };
 
+Status dracoOptions(const Args& a, DracoWriteOptions& dopt) {
+  if (a.has("quantization")) {
+    auto v = parseInt("quantization", a.get("quantization"), 0, 30);
+    if (!v) return v.status();
+    dopt.positionBits = int(*v);
+  }
+  if (a.has("normal-bits")) {
+    auto v = parseInt("normal-bits", a.get("normal-bits"), 1, 30);
+    if (!v) return v.status();
+    dopt.normalBits = int(*v);
+  }
+  if (a.has("draco-speed")) {
+    auto v = parseInt("draco-speed", a.get("draco-speed"), 0, 10);
+    if (!v) return v.status();
+    dopt.speed = int(*v);
+  }
+  return Status::ok();
+}
+
+// What a conversion wrote, for its summary.
+struct Converted {
+  uint64_t written = 0, bytes = 0, skipped = 0, read = 0, triangles = 0, inBytes = 0;
+  bool shifted = false;  // Draco: positions relative to a recorded origin
+  double seconds = 0;
+};
+
+Status writeDraco(const InputSet& input, const std::string& out, const DracoWriteOptions& dopt, bool strict, bool quiet,
+                  Progress& progress, Converted& c) {
+  DracoWriter w(dopt);
+  Filter f(w, input, strict, progress);
+  Status s = input.stream(f, input.hasTriangles());  // a single mesh input stays a mesh
+  progress.finish();
+  SA_RETURN_IF_ERROR(s);
+  c.skipped = f.skipped();
+  c.read = f.read();
+  progress("encode", 0, 1);
+  auto b = w.write(out, &c.shifted);
+  progress.finish();
+  if (!b) return b.status();
+  c.bytes = *b;
+  c.written = w.points();
+  c.triangles = w.triangles();
+  if (f.droppedTriangles() && !quiet)
+    std::fprintf(stderr, "scanatlas: warning: %llu triangles left out: vertices with NaN coordinates were removed\n",
+                 (unsigned long long)f.droppedTriangles());
+  return Status::ok();
+}
+
+// name: what the error names when no point was finite (the first input as the user gave it).
+Status writePointFile(const InputSet& input, const std::string& name, const std::string& out, const std::string& ext,
+                      const PointLayout& layout, bool strict, Progress& progress, Converted& c) {
+  auto w = ext == ".ply" ? openPlyWriter(out, layout) : openTextWriter(out, layout, ext == ".csv" ? ',' : ' ');
+  if (!w) return w.status();
+  Filter f(**w, input, strict, progress);
+  Status s = input.stream(f, false);
+  progress.finish();
+  SA_RETURN_IF_ERROR(s);  // the writer's destructor removes its temporary file
+  if (f.read() == f.skipped()) return Status::badInput(name + ": no finite points to write");
+  SA_RETURN_IF_ERROR((*w)->finish());
+  c.skipped = f.skipped();
+  c.read = f.read();
+  c.written = (*w)->written();
+  auto b = fileSize(out);
+  c.bytes = b ? *b : 0;
+  return Status::ok();
+}
+
+std::string attributeList(const PointLayout& layout) {
+  std::string attrs;
+  auto add = [&](bool on, const char* n) {
+    if (on) attrs += std::string(attrs.empty() ? "" : ",") + n;
+  };
+  add(layout.normals, "normals");
+  add(layout.colors, "colors");
+  add(layout.intensity, "intensity");
+  add(layout.confidence, "confidence");
+  add(layout.classification, "classification");
+  return attrs;
+}
+
+void printJson(const std::string& out, const std::string& ext, const PointLayout& layout, const DracoWriteOptions& dopt,
+               const Converted& c) {
+  std::printf("{\"output\": \"%s\", \"format\": \"%s\", \"points\": %llu, \"read\": %llu, \"skipped_points\": %llu, "
+              "\"bytes\": %llu, \"bytes_per_point\": %.3f, \"input_bytes\": %llu, \"attributes\": \"%s\", "
+              "\"triangles\": %llu, \"quantization_bits\": %d, \"origin_shifted\": %s, \"seconds\": %.3f}\n",
+              jsonEscape(out).c_str(), ext.c_str() + 1, (unsigned long long)c.written, (unsigned long long)c.read,
+              (unsigned long long)c.skipped, (unsigned long long)c.bytes, double(c.bytes) / double(std::max<uint64_t>(1, c.written)),
+              (unsigned long long)c.inBytes, attributeList(layout).c_str(), (unsigned long long)c.triangles,
+              ext == ".drc" ? dopt.positionBits : -1, c.shifted ? "true" : "false", c.seconds);
+}
+
+void printSummary(const std::string& out, const std::string& ext, const PointLayout& layout, const DracoWriteOptions& dopt,
+                  const Converted& c) {
+  const std::string attrs = attributeList(layout);
+  std::fprintf(stderr, "wrote %s: %llu points%s%s, %s%s\n  %.2f MiB (%.2f bytes/point; inputs %.2f MiB) in %.2fs\n",
+               out.c_str(), (unsigned long long)c.written,
+               c.skipped ? (" (" + std::to_string(c.skipped) + " NaN/Inf left out)").c_str() : "",
+               c.triangles ? (", " + std::to_string(c.triangles) + " triangles").c_str() : "",
+               attrs.empty() ? "positions only" : ("positions," + attrs).c_str(),
+               ext == ".drc" ? (", Draco " + (dopt.positionBits ? std::to_string(dopt.positionBits) + "-bit positions"
+                                                                : std::string("lossless positions")) +
+                                (c.shifted ? ", relative to a recorded origin" : ""))
+                                   .c_str()
+                             : "",
+               c.bytes / 1048576.0, double(c.bytes) / double(std::max<uint64_t>(1, c.written)), c.inBytes / 1048576.0, c.seconds);
+}
+
 }  // namespace
 
 int cmdConvert(int argc, char** argv) {
@@ -118,21 +225,8 @@ int cmdConvert(int argc, char** argv) {
     return reportError(Status::badInput(out + ": unknown output format '" + ext + "' (use .ply, .drc, .xyz, .txt or .csv)"));
   if (std::filesystem::is_directory(out)) return reportError(Status::badInput(out + ": is a directory; give a file name"));
   DracoWriteOptions dopt;
-  if (a.has("quantization")) {
-    auto v = parseInt("quantization", a.get("quantization"), 0, 30);
-    if (!v) return reportError(v.status());
-    dopt.positionBits = int(*v);
-  }
-  if (a.has("normal-bits")) {
-    auto v = parseInt("normal-bits", a.get("normal-bits"), 1, 30);
-    if (!v) return reportError(v.status());
-    dopt.normalBits = int(*v);
-  }
-  if (a.has("draco-speed")) {
-    auto v = parseInt("draco-speed", a.get("draco-speed"), 0, 10);
-    if (!v) return reportError(v.status());
-    dopt.speed = int(*v);
-  }
+  s = dracoOptions(a, dopt);
+  if (!s) return reportError(s);
   auto input = InputSet::open(a.positionals(), a.get("columns"));
   if (input) {
     Status used = checkNotAnInput(out, input->allPaths(), "-o");
@@ -158,78 +252,17 @@ int cmdConvert(int argc, char** argv) {
 
   const auto t0 = std::chrono::steady_clock::now();
   Progress progress(!quiet, "convert");
-  uint64_t written = 0, bytes = 0, skipped = 0, read = 0, triangles = 0;
-  bool shifted = false;
-  if (ext == ".drc") {
-    DracoWriter w(dopt);
-    Filter f(w, *input, a.flag("strict"), progress);
-    s = input->stream(f, input->hasTriangles());  // a single mesh input stays a mesh
-    progress.finish();
-    if (!s) return reportError(s);
-    skipped = f.skipped();
-    read = f.read();
-    progress("encode", 0, 1);
-    auto b = w.write(out, &shifted);
-    progress.finish();
-    if (!b) return reportError(b.status());
-    bytes = *b;
-    written = w.points();
-    triangles = w.triangles();
-    if (f.droppedTriangles() && !quiet)
-      std::fprintf(stderr, "scanatlas: warning: %llu triangles left out: vertices with NaN coordinates were removed\n",
-                   (unsigned long long)f.droppedTriangles());
-  } else {
-    auto w = ext == ".ply" ? openPlyWriter(out, layout) : openTextWriter(out, layout, ext == ".csv" ? ',' : ' ');
-    if (!w) return reportError(w.status());
-    Filter f(**w, *input, a.flag("strict"), progress);
-    s = input->stream(f, false);
-    progress.finish();
-    if (!s) return reportError(s);  // the writer's destructor removes its temporary file
-    if (f.read() == f.skipped()) return reportError(Status::badInput(a.positionals()[0] + ": no finite points to write"));
-    s = (*w)->finish();
-    if (!s) return reportError(s);
-    skipped = f.skipped();
-    read = f.read();
-    written = (*w)->written();
-    auto b = fileSize(out);
-    bytes = b ? *b : 0;
-  }
-  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  uint64_t inBytes = 0;
+  Converted c;
+  s = ext == ".drc" ? writeDraco(*input, out, dopt, a.flag("strict"), quiet, progress, c)
+                    : writePointFile(*input, a.positionals()[0], out, ext, layout, a.flag("strict"), progress, c);
+  if (!s) return reportError(s);
+  c.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   for (const auto& f : input->files()) {
     auto b = fileSize(f.path);
-    if (b) inBytes += *b;
+    if (b) c.inBytes += *b;
   }
-  std::string attrs;
-  auto add = [&](bool on, const char* n) {
-    if (on) attrs += std::string(attrs.empty() ? "" : ",") + n;
-  };
-  add(layout.normals, "normals");
-  add(layout.colors, "colors");
-  add(layout.intensity, "intensity");
-  add(layout.confidence, "confidence");
-  add(layout.classification, "classification");
-  if (a.flag("json")) {
-    std::printf("{\"output\": \"%s\", \"format\": \"%s\", \"points\": %llu, \"read\": %llu, \"skipped_points\": %llu, "
-                "\"bytes\": %llu, \"bytes_per_point\": %.3f, \"input_bytes\": %llu, \"attributes\": \"%s\", "
-                "\"triangles\": %llu, \"quantization_bits\": %d, \"origin_shifted\": %s, \"seconds\": %.3f}\n",
-                jsonEscape(out).c_str(), ext.c_str() + 1, (unsigned long long)written, (unsigned long long)read,
-                (unsigned long long)skipped, (unsigned long long)bytes, double(bytes) / double(std::max<uint64_t>(1, written)),
-                (unsigned long long)inBytes, attrs.c_str(), (unsigned long long)triangles, ext == ".drc" ? dopt.positionBits : -1,
-                shifted ? "true" : "false", secs);
-  } else if (!a.flag("quiet")) {
-    std::fprintf(stderr, "wrote %s: %llu points%s%s, %s%s\n  %.2f MiB (%.2f bytes/point; inputs %.2f MiB) in %.2fs\n",
-                 out.c_str(), (unsigned long long)written,
-                 skipped ? (" (" + std::to_string(skipped) + " NaN/Inf left out)").c_str() : "",
-                 triangles ? (", " + std::to_string(triangles) + " triangles").c_str() : "",
-                 attrs.empty() ? "positions only" : ("positions," + attrs).c_str(),
-                 ext == ".drc" ? (", Draco " + (dopt.positionBits ? std::to_string(dopt.positionBits) + "-bit positions"
-                                                                  : std::string("lossless positions")) +
-                                  (shifted ? ", relative to a recorded origin" : ""))
-                                     .c_str()
-                               : "",
-                 bytes / 1048576.0, double(bytes) / double(std::max<uint64_t>(1, written)), inBytes / 1048576.0, secs);
-  }
+  if (a.flag("json")) printJson(out, ext, layout, dopt, c);
+  else if (!a.flag("quiet")) printSummary(out, ext, layout, dopt, c);
   return 0;
 }
 
