@@ -109,6 +109,7 @@ struct Row {
   Summary gpu, cpu;
   double drawn = 0, culled = 0, splats = 0, sliced = 0, frags = 0, submitted = 0;
   double uploads = 0, evicted = 0, coarsened = 0, missing = 0, residentBytes = 0, heldBytes = 0;  // --gpu-budget, per frame
+  double deferred = 0, undeferred = 0;  // grooves: pixels left to the carved cast, and without a slot, per frame
   bool invocations = false;
   WorkCounters work;  // one counted frame per camera, after the timed ones (atomics cost time)
   RenderMode drawn_mode = RenderMode::kParallax;
@@ -142,6 +143,8 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
     row.missing += st.missing;
     row.residentBytes += double(st.residentBytes);
     row.heldBytes += double(st.heldBytes);
+    row.deferred += double(st.deferred);
+    row.undeferred += double(st.undeferred);
     csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f << ","
         << cam << "," << st.gpuMs << "," << st.cpuMs << "," << st.submitted << "," << st.culled << "," << st.drawn << ","
         << st.inside << "," << st.splats << "," << st.points << "," << st.fragments << "\n";
@@ -153,7 +156,9 @@ Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Co
   row.sliced /= n;
   row.frags /= n;
   row.submitted /= n;
-  for (double* v : {&row.uploads, &row.evicted, &row.coarsened, &row.missing, &row.residentBytes, &row.heldBytes}) *v /= n;
+  for (double* v : {&row.uploads, &row.evicted, &row.coarsened, &row.missing, &row.residentBytes, &row.heldBytes, &row.deferred,
+                    &row.undeferred})
+    *v /= n;
   row.gpu = summarize(gpu);
   row.cpu = summarize(cpu);
   row.invocations = fr.stats.fragmentsAreInvocations;
@@ -185,6 +190,8 @@ std::string rowJson(const Row& r, const Renderer& renderer, const PackReader& pa
        << ", \"bake_s\": " << ms.bakeSeconds;
   if (r.drawn_mode == RenderMode::kGdm)
     json << ", \"gdm_elsewhere\": \"" << (c.settings.gdmParallaxElsewhere ? "parallax" : "exact") << "\"";
+  if (r.drawn_mode == RenderMode::kGrooves)
+    json << ", \"grooves\": {\"deferred_per_frame\": " << r.deferred << ", \"unslotted_per_frame\": " << r.undeferred << "}";
   if (budget)
     json << ", \"budget\": {\"uploads_per_frame\": " << r.uploads << ", \"evicted_per_frame\": " << r.evicted
          << ", \"coarsened_per_frame\": " << r.coarsened << ", \"missing_per_frame\": " << r.missing

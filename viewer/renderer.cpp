@@ -122,13 +122,24 @@ struct Renderer::Gl {
   // Per surface mode (indexed by RenderMode): programs for boxes the camera is outside of
   // (front faces) and inside of (back faces); 0 where the mode cannot draw this pack.
   GLuint front[kRenderModes] = {}, inside[kRenderModes] = {};
-  GLuint grooveFlatFront = 0, grooveFlatInside = 0;  // grooves without the search for floors above h
+  // The same with self-shadowing (SHADOWS: llvmpipe runs a shadow ray's code on every pixel, asked
+  // for or not), linked when a frame first asks for shadows.
+  GLuint shadowFront[kRenderModes] = {}, shadowInside[kRenderModes] = {};
+  // grooves' second pass over the pixels the first deferred (grooves_defer.glsl): class 0 (the
+  // carved cast), class 1 (the march's hit stands, the footprint's anti-aliasing), class 0 with
+  // self-shadowing (linked when first asked for).
+  GLuint groovePixel[3] = {};
   GLuint splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
   GLuint vdmEntryBuf = 0, vdmWordBuf = 0;            // vdm: per-cell block offsets, the blocks
   GLuint gdmEntryBuf = 0, gdmWordBuf = 0;            // gdm: per-cell block offsets, the voxel grids
   GLuint grooveEntryBuf = 0, grooveWordBuf = 0;      // grooves: per-cell block offsets, profiles and blocks
+  GLuint grooveFieldBuf = 0;                         // grooves: the cells' gap fields (gcast::gapField)
+  // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): two slots a pixel,
+  // flags per 4x4 tile, the lists of tiles and their indirect draws.
+  GLuint deferSlotsTex = 0, deferTilesTex = 0, deferBuf = 0;
+  uint32_t deferCapacity = 0;  // tiles a slot's list holds
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
   // Streamed packs: the decoder, the cells decoded and waiting for upload, residency per cell.
@@ -155,8 +166,10 @@ struct Renderer::Gl {
   void releaseTargets() {
     GLuint fbos[] = {fbo, postFbo};
     glDeleteFramebuffers(2, fbos);
-    GLuint tex[] = {colorTex, linearTex, postTex};
-    glDeleteTextures(3, tex);
+    GLuint tex[] = {colorTex, linearTex, postTex, deferSlotsTex, deferTilesTex};
+    glDeleteTextures(5, tex);
+    glDeleteBuffers(1, &deferBuf);
+    deferSlotsTex = deferTilesTex = deferBuf = 0;
     GLuint rb[] = {depthRb, normalRb, cellRb};
     glDeleteRenderbuffers(3, rb);
     fbo = postFbo = colorTex = linearTex = postTex = depthRb = normalRb = cellRb = 0;
@@ -170,13 +183,14 @@ struct Renderer::Gl {
   int fbW = 0, fbH = 0;
   ~Gl() {
     streamer.reset();  // its threads write levels and read the pack: join them before anything goes
-    for (GLuint p : {splat, points, edl, boxes, grooveFlatFront, grooveFlatInside})
+    for (GLuint p : {splat, points, edl, boxes, groovePixel[0], groovePixel[1], groovePixel[2]})
       if (p) glDeleteProgram(p);
     for (int m = 0; m < kRenderModes; ++m)
-      for (GLuint p : {front[m], inside[m]})
+      for (GLuint p : {front[m], inside[m], shadowFront[m], shadowInside[m]})
         if (p) glDeleteProgram(p);
-    GLuint modeBufs[] = {mipBuf, mipOffBuf, counterBuf, vdmEntryBuf, vdmWordBuf, gdmEntryBuf, gdmWordBuf, grooveEntryBuf, grooveWordBuf};
-    glDeleteBuffers(9, modeBufs);
+    GLuint modeBufs[] = {mipBuf,     mipOffBuf,   counterBuf,     vdmEntryBuf,   vdmWordBuf,
+                         gdmEntryBuf, gdmWordBuf, grooveEntryBuf, grooveWordBuf, grooveFieldBuf};
+    glDeleteBuffers(10, modeBufs);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -477,6 +491,51 @@ static uint64_t uploadBlocks(uint32_t cellCount, const uint32_t* entries, uint64
   return (uint64_t(cellCount) + wordCount) * 4;
 }
 
+// grooves' deferred pixels (grooves_defer.glsl): slots a pixel; the lists' words before their tiles.
+constexpr int kDeferSlots = 3;
+constexpr int kDeferHead = 4 * 2 * kDeferSlots + 2;
+static std::string deferDefines() { return "#define DEFER_SLOTS " + std::to_string(kDeferSlots) + "\n"; }
+
+// A surface mode's box programs: front faces (the camera outside the box) or back faces (inside);
+// grooves: the first pass (the height field's march, deferring where the carved cast can differ).
+static std::string boxDefines(RenderMode m, bool inside) {
+  return std::string(inside ? "" : "#define FRONT_FACES 1\n") + (m == RenderMode::kGrooves ? "#define GROOVES_DEFER 1\n" + deferDefines() : "");
+}
+
+// The self-shadowing programs a frame drawing mode m needs (its own, parallax's for the cells it
+// leaves to them, grooves' second pass), linked the first time.
+Status Renderer::ensureShadowPrograms(RenderMode m) {
+  Gl& g = *gl_;
+  for (RenderMode k : {m, RenderMode::kParallax}) {
+    const ModeInfo& mi = modeInfo(k);
+    const int i = int(k);
+    if (!mi.castUnit || mi.vertexShader || !g.front[i] || g.shadowFront[i]) continue;
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, false) + "#define SHADOWS 1\n", g.shadowFront[i], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, true) + "#define SHADOWS 1\n", g.shadowInside[i], mi.castUnit));
+  }
+  if (m == RenderMode::kGrooves && g.groovePixel[0] && !g.groovePixel[2])
+    SA_RETURN_IF_ERROR(link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define SHADOWS 1\n" + deferDefines(), g.groovePixel[2],
+                            modeInfo(m).castUnit));
+  return Status::ok();
+}
+
+// grooves: the section's blocks, the cells' gap fields and the second pass's programs.
+Status Renderer::initGrooves(const PackReader& pack, const gcast::SectionView& v) {
+  Gl& g = *gl_;
+  grooveBytes_ = uploadBlocks(v.header.cellCount, v.entries, v.header.wordCount, v.words, g.grooveEntryBuf, g.grooveWordBuf);
+  grooveKind_.assign(v.header.cellCount, 0);
+  for (uint32_t i = 0; i < v.header.cellCount; ++i) grooveKind_[i] = v.entries[i] != gcast::kNoEntry ? 1 : 0;
+  const std::vector<uint32_t> field = gcast::gapField(pack, gcast::modelFromSection(pack, v));
+  glCreateBuffers(1, &g.grooveFieldBuf);
+  glNamedBufferStorage(g.grooveFieldBuf, GLsizeiptr(std::max<size_t>(field.size(), 1) * 4), field.data(), 0);
+  grooveBytes_ += field.size() * 4;
+  gpuBytes_ += grooveBytes_;
+  const char* unit = modeInfo(RenderMode::kGrooves).castUnit;
+  SA_RETURN_IF_ERROR(link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n" + deferDefines(), g.groovePixel[0], unit));
+  return link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define GROOVES_HIT_STANDS 1\n" + deferDefines(),
+              g.groovePixel[1], unit);
+}
+
 // Every surface mode this pack can draw: its programs and its baked sections on the GPU.
 Status Renderer::initModes(const PackReader& pack) {
   Gl& g = *gl_;
@@ -522,14 +581,7 @@ Status Renderer::initModes(const PackReader& pack) {
       auto v = gcast::readSection(pack);
       if (!v.isOk() && unusable(v.status())) continue;
       if (!v->present) continue;  // drawn as parallax: a groove neither detected nor given is never drawn
-      grooveBytes_ = uploadBlocks(v->header.cellCount, v->entries, v->header.wordCount, v->words, g.grooveEntryBuf,
-                                  g.grooveWordBuf);
-      gpuBytes_ += grooveBytes_;
-      grooveKind_.assign(v->header.cellCount, 0);
-      for (uint32_t i = 0; i < v->header.cellCount; ++i)
-        if (v->entries[i] != gcast::kNoEntry) grooveKind_[i] = gcast::blockRise(*v, i) > 0 ? 2 : 1;
-      SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n#define GROOVES_FLAT 1\n", g.grooveFlatFront, mi.castUnit));
-      SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define GROOVES_FLAT 1\n", g.grooveFlatInside, mi.castUnit));
+      SA_RETURN_IF_ERROR(initGrooves(pack, *v));
     }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
@@ -539,8 +591,8 @@ Status Renderer::initModes(const PackReader& pack) {
       gpuBytes_ += vdmBytes_;
     }
     const int k = int(mi.mode);
-    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "#define FRONT_FACES 1\n", g.front[k], mi.castUnit));
-    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", "", g.inside[k], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(mi.mode, false), g.front[k], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(mi.mode, true), g.inside[k], mi.castUnit));
   }
   glCreateBuffers(1, &g.counterBuf);
   glNamedBufferStorage(g.counterBuf, (8 + 256) * 4, nullptr, GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
@@ -737,6 +789,17 @@ Status Renderer::ensureTargets(int width, int height) {
   glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
   glCreateFramebuffers(1, &g.postFbo);
   glNamedFramebufferTexture(g.postFbo, GL_COLOR_ATTACHMENT0, g.postTex, 0);
+  if (g.grooveEntryBuf) {  // grooves' deferred pixels (grooves_defer.glsl)
+    const GLsizei tw = (width + 3) / 4, th = (height + 3) / 4;
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.deferSlotsTex);
+    glTextureStorage3D(g.deferSlotsTex, 1, GL_R32UI, width, height, 2 * kDeferSlots);
+    glCreateTextures(GL_TEXTURE_2D, 1, &g.deferTilesTex);
+    glTextureStorage2D(g.deferTilesTex, 1, GL_R32UI, tw, th);
+    g.deferCapacity = uint32_t(tw) * uint32_t(th);
+    glCreateBuffers(1, &g.deferBuf);
+    glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + 2 * kDeferSlots * uint64_t(g.deferCapacity)) * 4), nullptr,
+                         GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+  }
   if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE ||
       glCheckNamedFramebufferStatus(g.postFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
     return Status::internal("framebuffer incomplete at " + std::to_string(width) + "x" + std::to_string(height));
@@ -867,6 +930,10 @@ Renderer::FrameUniforms Renderer::frameUniforms(const Camera& cam, const RenderS
   f.heightLo = float(hLo);
   f.heightHi = float(hHi);
   f.pixelAngle = float(cam.fovDeg * M_PI / 180.0 / std::max(cam.height, 1));
+  const double ty = std::tan(cam.fovDeg * M_PI / 360.0), tx = ty * cam.width / std::max(cam.height, 1);
+  f.rayDx = (cam.right() * (2 * tx / std::max(cam.width, 1))).cast<float>();
+  f.rayDy = (cam.trueUp() * (2 * ty / std::max(cam.height, 1))).cast<float>();
+  f.rayBase = (cam.forward() - cam.right() * tx - cam.trueUp() * ty).cast<float>();
   f.light = s.lightDir.normalized().cast<float>();
   f.clipLo = (s.clip.lo - cam.eye).cast<float>();
   f.clipHi = (s.clip.hi - cam.eye).cast<float>();
@@ -892,6 +959,9 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     off += alignUp(list.size() * sizeof(DrawItem), g.ssboAlign);
   };
   const int m = int(drawnMode(s.mode));
+  const bool shadows = s.shadows && !s.headLight;
+  auto front = [&](int k) { return shadows ? g.shadowFront[k] : g.front[k]; };
+  auto inside = [&](int k) { return shadows ? g.shadowInside[k] : g.inside[k]; };
   // Slices: every listed cell the same way, whether the camera is inside its box or not;
   // count 0: per cell from its distance, at most autoMax.
   auto drawSlices = [&](const std::vector<DrawItem>& list, int count, int autoMax) {
@@ -913,8 +983,8 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
     // parallax's programs; below, the others)
     const bool ownApart = RenderMode(m) == RenderMode::kGrooves || (RenderMode(m) == RenderMode::kGdm && s.gdmParallaxElsewhere);
     const int plain = ownApart ? int(RenderMode::kParallax) : m;
-    drawList(vis.front, g.front[plain], GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
-    drawList(vis.inside, g.inside[plain], GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
+    drawList(vis.front, front(plain), GL_BACK, GL_TRIANGLES, 36);    // camera outside: front faces
+    drawList(vis.inside, inside(plain), GL_FRONT, GL_TRIANGLES, 36);  // camera inside: back faces
   }
   glDisable(GL_CULL_FACE);
   drawList(vis.splats, g.splat, GL_BACK, GL_POINTS, 1);
@@ -923,12 +993,15 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   while (autoMax < kAutoSlices && autoMax < s.autoPixels) autoMax *= 2;
   drawSlices(vis.sliced, 0, autoMax);
   glEnable(GL_CULL_FACE);
+  const bool grooves = RenderMode(m) == RenderMode::kGrooves && (!ownLists_[0].empty() || !ownLists_[1].empty());
+  if (grooves) beginGrooves(s, front(int(RenderMode::kGrooves)), inside(int(RenderMode::kGrooves)));
   const int gm = RenderMode(m) == RenderMode::kGdm ? int(RenderMode::kGdm) : int(RenderMode::kGrooves);
-  drawList(ownLists_[0], g.grooveFlatFront, GL_BACK, GL_TRIANGLES, 36);
-  drawList(ownLists_[1], g.grooveFlatInside, GL_FRONT, GL_TRIANGLES, 36);
-  drawList(ownLists_[2], g.front[gm], GL_BACK, GL_TRIANGLES, 36);
-  drawList(ownLists_[3], g.inside[gm], GL_FRONT, GL_TRIANGLES, 36);
+  drawList(ownLists_[0], front(gm), GL_BACK, GL_TRIANGLES, 36);  // grooves: the first pass
+  drawList(ownLists_[1], inside(gm), GL_FRONT, GL_TRIANGLES, 36);
+  drawList(ownLists_[2], front(gm), GL_BACK, GL_TRIANGLES, 36);  // gdm's forced cells
+  drawList(ownLists_[3], inside(gm), GL_FRONT, GL_TRIANGLES, 36);
   glDisable(GL_CULL_FACE);
+  if (grooves) drawDeferredGrooves(f, s);
   if (!s.showBoxes) return;
   // The decomposition view: every drawn box's edges, depth-tested against the surface.
   off = 0;
@@ -947,6 +1020,59 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   glDepthMask(GL_TRUE);
   glDepthFunc(GL_GREATER);
   glNamedFramebufferDrawBuffers(g.fbo, 4, bufs);
+}
+
+// grooves' first pass: no pixel deferred yet; the cells' gap fields, the slots and the lists bound.
+void Renderer::beginGrooves(const RenderSettings& s, unsigned frontProgram, unsigned insideProgram) {
+  Gl& g = *gl_;
+  const GLuint zero = 0;
+  for (int slot = 0; slot < kDeferSlots; ++slot)  // the cell layers (the hits are written when a slot is taken)
+    glClearTexSubImage(g.deferSlotsTex, 0, 0, 0, 2 * slot, g.fbW, g.fbH, 1, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+  glClearTexImage(g.deferTilesTex, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+  GLuint head[kDeferHead] = {};  // each list: a point a tile, no tiles yet; nothing deferred
+  for (int l = 0; l < 2 * kDeferSlots; ++l) head[4 * l] = 1;
+  glNamedBufferSubData(g.deferBuf, 0, sizeof(head), head);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, g.grooveFieldBuf);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.deferBuf);
+  glBindImageTexture(3, g.deferSlotsTex, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
+  glBindImageTexture(4, g.deferTilesTex, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
+  for (GLuint p : {GLuint(frontProgram), GLuint(insideProgram)}) {
+    glProgramUniform1ui(p, glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
+    glProgramUniform1i(p, glGetUniformLocation(p, "deferAll"), s.shadows && !s.headLight ? 1 : 0);
+  }
+}
+
+// grooves' second pass: each list's tiles by its class's program.
+void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s) {
+  Gl& g = *gl_;
+  glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT);
+  glBindBuffer(GL_DRAW_INDIRECT_BUFFER, g.deferBuf);
+  glEnable(GL_PROGRAM_POINT_SIZE);
+  for (int cls = 0; cls < 2; ++cls) {
+    const GLuint p = cls == 0 && s.shadows && !s.headLight ? g.groovePixel[2] : g.groovePixel[cls];
+    setCommonUniforms(p, f, s);
+    glUniform1ui(glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
+    glUniform1ui(glGetUniformLocation(p, "deferClass"), GLuint(cls));
+    glUniform2f(glGetUniformLocation(p, "viewportSize"), float(g.fbW), float(g.fbH));
+    glUniform3fv(glGetUniformLocation(p, "rayBase"), 1, f.rayBase.data());
+    glUniform3fv(glGetUniformLocation(p, "rayDx"), 1, f.rayDx.data());
+    glUniform3fv(glGetUniformLocation(p, "rayDy"), 1, f.rayDy.data());
+    for (int slot = 0; slot < kDeferSlots; ++slot) {
+      const int list = 2 * slot + cls;
+      glUniform1i(glGetUniformLocation(p, "deferSlot"), slot);
+      glUniform1i(glGetUniformLocation(p, "deferList"), list);
+      glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(list) * 16));
+    }
+  }
+  glDisable(GL_PROGRAM_POINT_SIZE);
+  glBindBuffer(GL_DRAW_INDIRECT_BUFFER, 0);
+}
+
+void Renderer::readDeferred(FrameStats& st) {
+  GLuint n[2] = {0, 0};
+  glGetNamedBufferSubData(gl_->deferBuf, 4 * 4 * 2 * kDeferSlots, sizeof(n), n);
+  st.deferred = n[0];
+  st.undeferred = n[1];
 }
 
 void Renderer::drawPoints(const Camera& cam, const FrameUniforms& f, const RenderSettings& s, FrameStats& st) {
@@ -1040,6 +1166,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   st.drawnMode = drawnMode(s.mode);
   const bool surface = s.mode != RenderMode::kPoints;
   VisibleSet vis;
+  if (surface && s.shadows && !s.headLight) SA_RETURN_IF_ERROR(ensureShadowPrograms(st.drawnMode));
   if (surface) uploadVisibility(cam, camRel, np, s, vis, st);
   if (surface && g.residency) {
     if (planBudget(cam, camRel, vis, st)) uploadVisibility(cam, camRel, np, s, vis, st);  // with this frame's uploads
@@ -1102,6 +1229,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   st.gpuMs = double(ns) / 1e6;
   st.fragments = frags;
   if (surface && s.countWork) readCounters(st.work);
+  if (surface && st.drawnMode == RenderMode::kGrooves && (!ownLists_[0].empty() || !ownLists_[1].empty())) readDeferred(st);
   out.milliseconds = st.cpuMs;
   out.cellsDrawn = st.drawn;
   readBack(cam, readBackMask, out);

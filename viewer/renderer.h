@@ -17,6 +17,9 @@
 #include "viewer/tile_cache.h"
 
 namespace sa {
+namespace gcast {
+struct SectionView;
+}
 
 const char* embeddedShader(std::string_view name);  // generated at build time
 
@@ -96,6 +99,9 @@ struct FrameStats {
   int budgetBias = 0;
   uint64_t residentBytes = 0, heldBytes = 0;
   uint64_t points = 0;         // points mode: points drawn
+  // grooves: pixels the first pass left to the carved cast (near a groove), and those it drew as
+  // the height field because both of their slots held other cells (grooves_defer.glsl).
+  uint64_t deferred = 0, undeferred = 0;
   double cpuMs = 0;            // culling + submission + glFinish, wall clock
   double gpuMs = -1;           // GL_TIME_ELAPSED of the draws (-1 when unavailable)
   uint64_t fragments = 0;      // fragment shader invocations (or samples passed, see below)
@@ -177,6 +183,8 @@ class Renderer {
     Eigen::Vector4f plane;
     float heightLo = 0, heightHi = 0;
     float pixelAngle = 0;  // vertical field of view over the height in pixels (radians)
+    // The ray through framebuffer position (x, y) (world, camera-relative): rayBase + rayDx x + rayDy y.
+    Eigen::Vector3f rayBase, rayDx, rayDy;
   };
   void uploadPages(const PackReader& pack);
   unsigned pageTexture(unsigned format, bool present, const uint8_t* fill, unsigned fillFormat, uint32_t w, uint32_t h,
@@ -194,7 +202,12 @@ class Renderer {
   FrameUniforms frameUniforms(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel, double np) const;
   void setCommonUniforms(unsigned program, const FrameUniforms& f, const RenderSettings& s) const;
   void drawCells(const VisibleSet& vis, const FrameUniforms& f, const RenderSettings& s, const unsigned* bufs);
+  void beginGrooves(const RenderSettings& s, unsigned frontProgram, unsigned insideProgram);
+  Status ensureShadowPrograms(RenderMode m);
+  void drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s);
+  void readDeferred(FrameStats& st);
   Status initModes(const PackReader& pack);
+  Status initGrooves(const PackReader& pack, const gcast::SectionView& v);
   void readCounters(WorkCounters& w);
   void drawPoints(const Camera& cam, const FrameUniforms& f, const RenderSettings& s, FrameStats& st);
   void drawEdl(const RenderSettings& s);
@@ -208,14 +221,13 @@ class Renderer {
   bool hasColor_ = false, hasNormals_ = false;
   uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0, grooveBytes_ = 0;
   std::string modeProblems_[kRenderModes];
-  // grooves: per cell 0 (no grooves: drawn by the parallax programs), 1 (grooves, no floor above
-  // the height field: the program without that search), 2 (the whole cast); this frame's boxes of
-  // kinds 1 and 2, camera outside / inside (a mode's shader costs on every pixel of every box it
-  // draws, taken branches or not, so a box gets the least program that draws it exactly).
-  std::vector<uint8_t> grooveKind_;  // per cell: 0 no grooves, 1 floors never above h, 2 the whole cast
+  // A mode's shader costs llvmpipe on every pixel of every box it draws, taken branches or not, so
+  // a box gets the least program that draws it exactly: per cell, grooves 0 (none: parallax's
+  // programs) or 1 (the two passes of grooves_defer.glsl).
+  std::vector<uint8_t> grooveKind_;
   std::vector<uint8_t> gdmKind_;     // per cell: 2 a voxel grid (forced), 0 none
   // The boxes a mode's own programs draw, apart from those parallax's draw (grooves; gdm with
-  // parallax elsewhere): grooves' flat front and inside, then the whole cast's front and inside.
+  // parallax elsewhere): grooves' front and inside, then gdm's front and inside.
   std::vector<DrawItem> ownLists_[4];
   // The frame's draw lists in upload order (their offsets in the item buffer follow it).
   std::array<const std::vector<DrawItem>*, 8> drawOrder(const VisibleSet& vis) const;

@@ -672,4 +672,55 @@ bool castGrooved(const PackReader& pack, const CellRecord& c, const Model& m, ui
   return true;
 }
 
+double gapQuantum(const CellRecord& c) {
+  const double tu = (c.box[1] - c.box[0]) / std::max<int>(c.tileW, 1), tv = (c.box[3] - c.box[2]) / std::max<int>(c.tileH, 1);
+  return kGapFieldTexels * std::min(tu, tv) / 65535.0;
+}
+
+// One cell's field: at each texel's centre the least (distance - lip) and (distance - half width)
+// over the pieces within the cap's reach of it, less half the texel's diagonal (the bounds over its
+// square: distance is 1-Lipschitz) and a thousandth of a texel (the shader's float arithmetic).
+static void cellGapField(const CellRecord& c, const CellPieces& cp, uint32_t* out) {
+  const int W = std::max<int>(c.tileW, 1), H = std::max<int>(c.tileH, 1);
+  const double tu = (c.box[1] - c.box[0]) / W, tv = (c.box[3] - c.box[2]) / H;
+  const double half = 0.5 * std::hypot(tu, tv), q = gapQuantum(c), cap = 65535.0 * q;
+  std::vector<double> lip(size_t(W) * H, cap + half + 1), width(lip);
+  for (const Piece& p : cp.pieces) {
+    const Eigen::Vector2d b = p.a + p.e * p.length;
+    const double r = std::max(p.lip, p.halfWidth) + cap + half;
+    const int i0 = std::max(0, int(std::floor((std::min(p.a.x(), b.x()) - r - c.box[0]) / tu))),
+              i1 = std::min(W - 1, int(std::ceil((std::max(p.a.x(), b.x()) + r - c.box[0]) / tu)));
+    const int j0 = std::max(0, int(std::floor((std::min(p.a.y(), b.y()) - r - c.box[2]) / tv))),
+              j1 = std::min(H - 1, int(std::ceil((std::max(p.a.y(), b.y()) + r - c.box[2]) / tv)));
+    for (int j = j0; j <= j1; ++j)
+      for (int i = i0; i <= i1; ++i) {
+        double s, x;
+        const Eigen::Vector2d ctr(c.box[0] + (i + 0.5) * tu, c.box[2] + (j + 0.5) * tv);
+        const double d = pieceDistance(p, ctr, s, x);
+        const size_t k = size_t(j) * W + i;
+        lip[k] = std::min(lip[k], d - p.lip);
+        width[k] = std::min(width[k], d - p.halfWidth);
+      }
+  }
+  const double margin = half + 1e-3 * std::min(tu, tv);
+  auto code = [&](double gap) {
+    const double v = (gap - margin) / q;
+    return v <= 0 ? 0u : v >= 65535 ? 65535u : uint32_t(std::floor(v));
+  };
+  for (size_t k = 0; k < lip.size(); ++k) out[k] = code(lip[k]) | code(width[k]) << 16;
+}
+
+std::vector<uint32_t> gapField(const PackReader& pack, const Model& m) {
+  const auto cells = pack.cells();
+  std::vector<uint32_t> words(cells.size(), kNoEntry);
+  for (const CellPieces& cp : m.cells) {
+    const CellRecord& c = cells[cp.cell];
+    const size_t texels = size_t(std::max<int>(c.tileW, 1)) * std::max<int>(c.tileH, 1);
+    words[cp.cell] = uint32_t(words.size());
+    words.resize(words.size() + texels, 0u);
+    cellGapField(c, cp, words.data() + words[cp.cell]);
+  }
+  return words;
+}
+
 }  // namespace sa::gcast

@@ -118,6 +118,19 @@ Result<SectionView> readSection(const PackReader& pack);
 float blockRise(const SectionView& v, uint32_t cell);
 Model modelFromSection(const PackReader& pack, const SectionView& v);
 
+// The renderer's gap field (two passes, viewer/renderer.cpp): per texel of each cell with pieces,
+// lower bounds over the texel's square of min over its pieces of (distance to the piece's segment
+// - its lip) and of (distance - its half width), in frame units: where they exceed the reach of
+// every rule that can change a pixel (the capsule and the stretch a floor above h is searched
+// over; the anti-aliasing's footprint), the carved cast's answer is the height field's. Clamped to
+// kGapFieldTexels texels (a larger reach reads the cap and takes the carved cast). Words: per pack
+// cell the first word of its field (kNoEntry: none), then the fields, row-major (u fastest), a
+// word a texel: the lip's bound in the low 16 bits, the half width's in the high, each in units of
+// gapQuantum(cell), rounded down.
+inline constexpr double kGapFieldTexels = 32;
+double gapQuantum(const CellRecord& c);
+std::vector<uint32_t> gapField(const PackReader& pack, const Model& m);
+
 // --- the cast (the shader's grooves.glsl in double) ---
 
 // Distance from (u, v) to the piece's segment; s, x: the point's coordinates along and across.

@@ -14,14 +14,14 @@
 // two pixels is anti-aliased over the pixel's footprint (003 eq. 6's area ratios, here
 // integrated by grooveSamples rays across the groove, each cast through the grooves' profiles
 // on the rim plane). Cells without grooves cast their height field alone.
+// The renderer draws it in two passes (grooves_defer.glsl): the height field's march everywhere
+// (GROOVES_DEFER), this cast only where it can differ.
 #define PARALLAX_NO_CAST 1
 #include "parallax_cast.glsl"
 
-#define MODE_POST_SHADE 1
-#define MODE_EXTENDS_BOX 1
-
 layout(std430, binding = 6) readonly buffer GrooveEntries { uint grooveEntry[]; };  // block of each cell, ~0u: none
 layout(std430, binding = 7) readonly buffer GrooveWords { uint grooveWord[]; };    // profiles, then the blocks
+#include "grooves_defer.glsl"
 
 uniform bool grooveAA;       // anti-alias grooves under two pixels wide
 uniform int grooveSamples;   // rays across such a groove per pixel
@@ -40,6 +40,11 @@ struct GPiece {
 };
 
 float gWordF(uint w) { return uintBitsToFloat(grooveWord[w]); }
+
+// How far from a hit at tS a groove's half width may lie and still be in the pixel's footprint
+// (modePostShade): its samples reach 0.71 pixel from the centre, on the surface that over the
+// incidence's cosine (taken at least 0.1).
+float gFootprintReach(float tS, vec3 d) { return 0.75 * tS * pixelAngle / max(abs(d.z), 0.1); }
 
 GPiece gPiece(uint blk, uint i) {
   uint w = blk + grooveWord[blk + 3u] + i * 14u;
@@ -253,6 +258,42 @@ bool gMarchOn(Cell c, vec3 o, vec3 d, float t0, float t1, out float tHit) {
   return false;
 }
 
+#ifdef GROOVES_DEFER
+uniform bool deferAll;  // self-shadowing: every hit takes the carved cast (its shadow ray too)
+
+// The first pass: the height field's march; a pixel where the carved cast can differ is deferred
+// to the second (deferPixel) and not drawn here. It can differ only where the hit is inside a capsule, or within
+// twice the stretch a floor above h is searched over of one (castCell's window, from either end);
+// within the anti-aliasing's reach of a groove's half width (modePostShade); or, where floors rise
+// above h and the march misses, the same near the extended box's exit.
+bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
+  bool hit = parallaxTrace(c, boxSteps, o, d, tEnter, tExit, tHit, work);
+  uint blk = grooveEntry[cell];
+  if (blk == kNoGrooves) return hit;
+  float rise = gWordF(blk + 5u);
+  // The stretch before the height field's hit (or, on a miss, the extended box's exit) where the
+  // carved cast looks for a floor above h: no piece within the stretch's reach of its two ends.
+  float window = rise > 0.0 ? 2.0 * length(d.xy) * 1.25 * rise / max(abs(d.z), 0.02) : 0.0;
+  bool carve = deferAll && hit, footprint = false;
+  if (!hit && rise > 0.0) {
+    vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, min(c.boxW.x, gWordF(blk + 4u))), bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
+    vec3 t0 = (bmin - o) / d, t1 = (bmax - o) / d;
+    vec3 tf = max(t0, t1);
+    carve = grooveGap(c, cell, (o + d * min(min(tf.x, tf.y), tf.z)).xy).x <= window;
+  } else if (hit && !deferAll) {
+    vec2 gap = grooveGap(c, cell, (o + d * tHit).xy);
+    carve = gap.x <= window;
+    footprint = grooveAA && gap.y <= gFootprintReach(tHit, d);
+  }
+  if (!(carve || footprint) || !deferPixel(cell, carve ? 0u : 1u, hit ? tHit : -1.0)) return hit;
+  return false;  // counted as a ray with the march's work here; the second pass adds its own
+}
+
+bool shadowRay(Cell c, int cell, vec3 p, vec3 l) { return parallaxShadowRay(c, p, l); }
+#else
+#define MODE_POST_SHADE 1
+#define MODE_EXTENDS_BOX 1
+
 // The grooves cut below the height field's box: the cast runs down to the lowest floor.
 void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
   uint blk = grooveEntry[cell];
@@ -281,6 +322,13 @@ float gFloorCrossing(Cell c, GPiece p, vec3 o, vec3 d, float t0, float t1) {
 // its capsule, until it is solid; out of every capsule and above the height field, the march
 // goes on from there.
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
+#ifdef GROOVES_HIT_STANDS
+  // The second pass's class 1: the march's hit is the surface (only modePostShade has work).
+  tHit = deferredHit;
+  work = 0u;
+  deferredHit = kNotDeferred;
+  return tHit >= 0.0;
+#else
   uint blk = grooveEntry[cell];
   if (blk == kNoGrooves) return parallaxTrace(c, boxSteps, o, d, tEnter, tExit, tHit, work);
   vec2 texel = (c.boxUV.yw - c.boxUV.xz) / c.boxW.zw;
@@ -296,7 +344,19 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
   vec3 tn = min(t0, t1), tf = max(t0, t1);
   float hEnter = max(max(max(tn.x, tn.y), tn.z), 0.0), hExit = min(min(tf.x, tf.y), tf.z);
   work = 0u;
+#ifdef PIXEL_RAYS
+  // The second pass: the first pass's march already found the height field's hit.
+  bool hh;
+  if (deferredHit != kNotDeferred) {
+    th = deferredHit;
+    hh = th >= 0.0;
+    deferredHit = kNotDeferred;
+  } else {
+    hh = hEnter < hExit && parallaxTrace(c, boxSteps, o, d, hEnter, hExit, th, work);
+  }
+#else
   bool hh = hEnter < hExit && parallaxTrace(c, boxSteps, o, d, hEnter, hExit, th, work);
+#endif
   int air, lowest;
   // The common case: no floor rises above the height field, and its hit is in no capsule.
   bool usual = hh && rise == 0.0 && !gCover(c, blk, o + d * th, air, lowest);
@@ -316,7 +376,6 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     // Only where a capsule comes within the stretch's reach of its ends (the bins hold the pieces
     // near them): each such piece's first floor crossing inside its capsule over the stretch.
     float reach = length(d.xy) * (tH - ta), best = 1e30;
-#ifndef GROOVES_FLAT  // (cells whose floors never rise above h are drawn without it)
     for (int e = 0; e < (rise > 0.0 ? 2 : 0); ++e) {
       vec2 qe = (o + d * (e == 0 ? tH : ta)).xy;
       int b = gBin(c, blk, qe);
@@ -331,7 +390,6 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
         if (tc >= 0.0) best = min(best, tc);
       }
     }
-#endif
 
     if (best < tH) {
       // On a floor: solid unless in another groove's air (the advance below goes on from there).
@@ -372,6 +430,7 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     castHasNormal = true;
   }
   return true;
+#endif
 }
 
 // Self-shadowing: the same carved cast from just above the hit toward the light (a crack's floor
@@ -381,11 +440,28 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   vec3 o;
   float tExit = shadowRayExit(c, p, l, o);
   if (tExit <= 0.0) return false;
+  // From a groove's floor the ray starts in its air, under the height field (the cast below looks
+  // from the height field's hit on): through the air of the pieces it is in until solid (a wall
+  // or another floor: shadowed) or out of every capsule (under h there: shadowed).
+  uint blk = grooveEntry[cell];
+  float t0 = 0.0;
+  int air, lowest;
+  for (int j = 0; j < (blk == kNoGrooves ? 0 : 16); ++j) {
+    vec3 q = o + l * t0;
+    if (!gCover(c, blk, q, air, lowest)) {
+      float h = sampleHeight(c, q.xy);
+      if (j > 0 && h != kUncovered && q.z <= h) return true;
+      break;
+    }
+    if (air < 0) return true;
+    t0 = gAirExit(c, gPiece(blk, uint(air)), o, l, t0, tExit);
+    if (t0 >= tExit) return false;
+  }
   bool hasN = castHasNormal;
   vec3 n = castNormal;
   float t;
   uint work;
-  bool r = castCell(c, cell, 0, o, l, 0.0, tExit, t, work);
+  bool r = castCell(c, cell, 0, o, l, t0, tExit, t, work);
   castHasNormal = hasN;
   castNormal = n;
   return r;
@@ -448,7 +524,7 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   if (!grooveAA || blk == kNoGrooves) return color;
   vec3 hit = o + d * tS;
   float foot = tS * pixelAngle;  // a pixel across the ray at the hit
-  float reach = 1.5 * foot / max(abs(d.z), 0.2);
+  float reach = gFootprintReach(tS, d);
   int G = int(grooveWord[blk]);
   vec2 span = (c.boxUV.yw - c.boxUV.xz) / float(G);
   int best = -1;
@@ -509,3 +585,4 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   }
   return wsum > 0.0 ? sum / wsum : color;
 }
+#endif

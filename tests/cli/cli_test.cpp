@@ -598,8 +598,9 @@ TEST(Cli, GroovesExportJsonAndCsv) {
 }
 
 // The grooves mode through the binary: pack --modes grooves detects and stores them, info lists
-// the section, render draws them (the image differs from parallax's), pack --grooves FILE takes
-// given ones, bad files fail cleanly with nothing written.
+// the section, render draws them (the image differs from parallax's), bench counts the pixels
+// the carved cast drew, pack --grooves FILE takes given ones, bad files fail cleanly with nothing
+// written.
 TEST(Cli, GroovesModePackBakeRender) {
   test::TempDir d;
   const SyntheticScan scan = makeGrooveScan(160, 1, 0.1, acceptanceGrooves(160, 1, 0.1), 5);
@@ -614,6 +615,14 @@ TEST(Cli, GroovesModePackBakeRender) {
   ASSERT_EQ(run("render " + pack + " --orbit 1 --size 128x128 --mode grooves -o " + a).code, 0);
   ASSERT_EQ(run("render " + pack + " --orbit 1 --size 128x128 --mode parallax -o " + b).code, 0);
   EXPECT_NE(bytesOf(a), bytesOf(b));
+  // bench --json: the pixels the first pass left to the carved cast, every one with a slot.
+  const CmdResult bj = run("bench " + pack + " --orbit 2 --size 128x128 --warmup 0 --frames 2 --mode parallax,grooves --json");
+  ASSERT_EQ(bj.code, 0) << bj.err;
+  const auto bc = nlohmann::json::parse(bj.out)["configs"];
+  ASSERT_EQ(bc.size(), 2u);
+  EXPECT_FALSE(bc[0].contains("grooves"));
+  EXPECT_GT(bc[1]["grooves"]["deferred_per_frame"].get<double>(), 0.0) << bc[1].dump();
+  EXPECT_EQ(bc[1]["grooves"]["unslotted_per_frame"].get<double>(), 0.0) << bc[1].dump();
   // Given grooves: an export, edited (one groove kept), taken as it is.
   ASSERT_EQ(run("grooves " + in + " --json " + d.file("all.json") + " --quiet").code, 0);
   nlohmann::json j = nlohmann::json::parse(bytesOf(d.file("all.json")));

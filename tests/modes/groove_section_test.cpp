@@ -1,11 +1,13 @@
 // The GROO section (modes/grooves/groove_cast.h): a model built from given grooves on a packed
 // plane round-trips through the pack, and a corrupted section (sizes, block offsets, bin lists,
 // piece and profile references) is refused with a message naming the pack, never trusted. On a
-// curved surface the rim meets the height field at the capsule's sides.
+// curved surface the rim meets the height field at the capsule's sides. The renderer's gap field
+// bounds the distance to the capsules from below everywhere, within a texel.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstring>
+#include <random>
 
 #include "../common/render_util.h"
 #include "modes/grooves/groove_cast.h"
@@ -144,6 +146,53 @@ TEST(GrooveSection, CorruptionIsRefused) {
 // profile) the rim must be the surface, to a quarter of what the surface's tangent plane at the
 // line would be off (lip^2 / 2R; a rim that stood off by that drew a step along every groove on a
 // curved surface, as on Igea's lips).
+// The two-pass renderer skips the carved cast where the gap field says no capsule is near: the
+// field must never exceed the true gap (distance to a piece's segment less its lip, or less its
+// half width) anywhere in a texel, and should be within a texel of it (else pixels are deferred
+// for nothing); past the cap it reads the cap.
+TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
+  Fixture f;
+  makePlane(f);
+  ASSERT_FALSE(f.model.cells.empty());
+  const std::vector<uint32_t> words = gcast::gapField(f.pack, f.model);
+  ASSERT_EQ(words.size() >= f.pack.cells().size(), true);
+  std::mt19937 rng(5);
+  size_t points = 0, capped = 0;
+  double worstSlack = 0;
+  for (const gcast::CellPieces& cp : f.model.cells) {
+    const CellRecord& c = f.pack.cells()[cp.cell];
+    ASSERT_NE(words[cp.cell], gcast::kNoEntry);
+    const double tu = (c.box[1] - c.box[0]) / c.tileW, tv = (c.box[3] - c.box[2]) / c.tileH, q = gcast::gapQuantum(c);
+    std::uniform_real_distribution<double> U(c.box[0], c.box[1]), V(c.box[2], c.box[3]);
+    for (int k = 0; k < 20000; ++k) {
+      const Eigen::Vector2d p(U(rng), V(rng));
+      const int i = std::clamp(int((p.x() - c.box[0]) / tu), 0, c.tileW - 1), j = std::clamp(int((p.y() - c.box[2]) / tv), 0, c.tileH - 1);
+      const uint32_t w = words[words[cp.cell] + size_t(j) * c.tileW + i];
+      double lip = 1e300, width = 1e300;
+      for (const gcast::Piece& pc : cp.pieces) {
+        double s, x;
+        const double d = gcast::pieceDistance(pc, p, s, x);
+        lip = std::min(lip, d - pc.lip);
+        width = std::min(width, d - pc.halfWidth);
+      }
+      const double bLip = (w & 0xffff) * q, bWidth = (w >> 16) * q;
+      ASSERT_LE(bLip, std::max(lip, 0.0) + 1e-12) << "at " << p.transpose();
+      ASSERT_LE(bWidth, std::max(width, 0.0) + 1e-12) << "at " << p.transpose();
+      ++points;
+      if ((w & 0xffff) == 0xffff) {
+        ++capped;
+        EXPECT_GE(lip, 65535 * q - std::hypot(tu, tv));
+      } else if (lip > 0) {
+        worstSlack = std::max(worstSlack, (lip - bLip) / std::min(tu, tv));
+      }
+    }
+  }
+  std::printf("[groove-gap] %zu points in %zu cells: %zu past the cap; the bound at most %.2f texels under the gap\n", points,
+              f.model.cells.size(), capped, worstSlack);
+  EXPECT_GT(capped, 0u);
+  EXPECT_LE(worstSlack, 1.5);
+}
+
 TEST(GrooveRim, MeetsACurvedSurfaceAtTheCapsulesSides) {
   test::TempDir dir;
   const double R = 0.3, sp = 0.005;

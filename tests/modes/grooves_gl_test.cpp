@@ -251,11 +251,79 @@ TEST_F(GroovesGl, DepthMatchesTheCarvedMeshAt20And2And03Pixels) {
                 widthPixels(cam, width), n, agree, agreeParallax);
     EXPECT_GT(n, px > 10 ? 5000u : px > 1 ? 500u : 80u);
     EXPECT_GE(agree, 0.99) << px << " px";
+    // The carved cast ran only where the first pass deferred (near the grooves), and every such
+    // pixel found a slot.
+    std::printf("[grooves-gl] %.1f px: %llu pixels deferred to the carved cast, %llu without a slot\n", px,
+                (unsigned long long)g.stats.deferred, (unsigned long long)g.stats.undeferred);
+    EXPECT_GE(g.stats.deferred, n / 2);
+    EXPECT_EQ(g.stats.undeferred, 0u);
     // The plane alone is not the carved surface: the grooves are really drawn.
     if (px > 1) {
       EXPECT_LT(agreeParallax, 0.5) << px << " px";
     }
   }
+}
+
+// Self-shadowing (every hit of a cell with grooves then takes the carved cast, and its shadow ray
+// the carved surface): a light low across the two grooves that run along b shades their floors
+// near the wall it comes over. Against the carved surface's own shadows (the analytic profile,
+// marched toward the light) the flags agree; parallax (the plane alone) has none.
+TEST_F(GroovesGl, ShadowsFallInsideTheGroovesAsOnTheCarvedSurface) {
+  const Camera cam = view(256);
+  const double width = widthFor(cam, 20);
+  test::TempDir dir;
+  PackReader p;
+  ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
+  Renderer r;
+  ASSERT_TRUE(r.init(p).isOk());
+  RenderSettings rs;
+  rs.shadows = true;
+  rs.headLight = false;
+  const double elevation = 25 * M_PI / 180;
+  rs.lightDir = std::cos(elevation) * kU + std::sin(elevation) * kN;
+  const Eigen::Vector3d l(rs.lightDir.dot(kU), rs.lightDir.dot(kV), rs.lightDir.dot(kN));
+  FrameResult fr[2];
+  for (int k = 0; k < 2; ++k) {
+    rs.mode = k ? RenderMode::kParallax : RenderMode::kGrooves;
+    Status s = r.render(cam, rs, fr[k], kReadDepth | kReadShadow);
+    ASSERT_TRUE(s.isOk()) << s.message();
+  }
+  size_t groove = 0, agree = 0, shadowed = 0, cpuShadowed = 0, parallaxShadowed = 0, plane = 0, planeShadowed = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const size_t i = size_t(y) * cam.width + x;
+      if (!std::isfinite(fr[0].depth[i])) continue;
+      const Eigen::Vector2d q = planePoint(cam, x + 0.5, y + 0.5, fr[0].depth[i]);
+      if (std::abs(q.x()) > 0.9 || std::abs(q.y()) > 0.9) continue;
+      bool in = false;
+      const double h = -carved(width, q.x(), q.y(), &in);
+      if (!in) {
+        double gapToGroove = 1e9;
+        for (const TestGroove& g : kGrooves) gapToGroove = std::min(gapToGroove, distanceTo(g, q.x(), q.y()) - width / 2);
+        if (gapToGroove > width / 4) {
+          ++plane;
+          planeShadowed += fr[0].shadowed[i];
+        }
+        continue;
+      }
+      // The carved surface's shadow: marched from the point toward the light until above the plane.
+      bool cpu = false;
+      for (double t = width / 400; h + t * l.z() < 0 && !cpu; t += width / 400)
+        cpu = h + t * l.z() < -carved(width, q.x() + t * l.x(), q.y() + t * l.y()) - 1e-4 * width;
+      ++groove;
+      shadowed += fr[0].shadowed[i];
+      cpuShadowed += cpu;
+      parallaxShadowed += fr[1].shadowed[i];
+      agree += bool(fr[0].shadowed[i]) == cpu;
+    }
+  std::printf("[grooves-gl] shadows: %zu groove pixels, %zu shadowed (carved surface: %zu, parallax: %zu), %.4f agree; "
+              "%zu of %zu plane pixels shadowed\n",
+              groove, shadowed, cpuShadowed, parallaxShadowed, double(agree) / double(std::max<size_t>(groove, 1)), planeShadowed, plane);
+  EXPECT_GT(groove, 5000u);
+  EXPECT_GT(cpuShadowed, groove / 20);
+  EXPECT_GE(double(agree), 0.97 * double(groove));
+  EXPECT_EQ(parallaxShadowed, 0u);
+  EXPECT_LE(double(planeShadowed), 0.001 * double(plane));
 }
 
 TEST_F(GroovesGl, NarrowGroovesAreAntiAliasedLikeSupersampling) {
@@ -407,8 +475,11 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
   double maxWidth = 0;
   for (const Groove& g : set->grooves) maxWidth = std::max(maxWidth, g.width);
   const double margin = 4 * p.meta().sampleSpacing + maxWidth;
+  uint64_t deferred = 0, undeferred = 0;
   for (const Camera& cam : orbitCameras(lo, hi, 4, p.viewUp(), 40, 256, 256)) {
     const FrameResult g = render(r, cam, RenderMode::kGrooves), par = render(r, cam, RenderMode::kParallax);
+    deferred += g.stats.deferred;
+    undeferred += g.stats.undeferred;
     for (int y = 0; y < cam.height; ++y)
       for (int x = 0; x < cam.width; ++x) {
         const size_t i = size_t(y) * cam.width + x;
@@ -417,8 +488,8 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
         const Eigen::Vector3d w = cam.eye + dir * (par.depth[i] / dir.dot(cam.forward()));
         double dist = INFINITY;
         for (const Groove& gr : set->grooves) dist = std::min(dist, lineDistance(gr, w) - gr.width / 2);
-        // Beyond the anti-aliasing's reach too (1.5 pixel footprints over the incidence's cosine,
-        // at most 1/0.2).
+        // Beyond the anti-aliasing's reach too (0.75 pixel footprints over the incidence's cosine,
+        // at most 1/0.1: grooves.glsl gFootprintReach).
         const double footprint = (w - cam.eye).norm() * cam.fovDeg * M_PI / 180 / cam.height;
         if (dist > margin + 7.5 * footprint) {
           ++far;
@@ -434,6 +505,12 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
   }
   std::printf("[grooves-gl] igea: %zu pixels away from the grooves, %zu the same as parallax; %zu on them, %zu changed\n", far,
               farSame, near, nearChanged);
+  // Where several cells' boxes with grooves overlap on a pixel (27 of them here), a fourth cell
+  // finds no slot and draws its height field there.
+  std::printf("[grooves-gl] igea: %llu pixels deferred to the carved cast, %llu without a slot\n", (unsigned long long)deferred,
+              (unsigned long long)undeferred);
+  EXPECT_GT(deferred, 1000u);
+  EXPECT_LE(double(undeferred), 0.03 * double(deferred));
   EXPECT_GT(far, 10000u);
   EXPECT_GE(double(farSame), 0.999 * double(far));
   EXPECT_GT(nearChanged, 0u);

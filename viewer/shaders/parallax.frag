@@ -31,6 +31,13 @@ void count(uint work, bool hit) {
   atomicAdd(counters[8u + min(work, 255u)], 1u);
 }
 
+// A deferred ray's second pass (grooves_defer.glsl): the first counted the ray and its march.
+void countMore(uint work, bool hit) {
+  if (!countWork) return;
+  atomicAdd(counters[1], work);
+  if (hit) atomicAdd(counters[4], 1u);
+}
+
 void countEvent(uint k) {
   if (countWork) atomicAdd(counters[k], 1u);
 }
@@ -48,10 +55,12 @@ uniform vec3 baseColor;
 layout(depth_less) out float gl_FragDepth;
 #endif
 
+#ifndef PIXEL_RAYS
 in vec3 vFrame;
 flat in int vCell;
 flat in int vSteps;
 flat in vec3 vCamFrame;
+#endif
 
 uniform float nearPlane;
 uniform bool shadows;       // self-shadowing: a second cast toward lightDir (shadowRay, the mode's unit)
@@ -63,14 +72,22 @@ layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
 layout(location = 3) out uint outCell;    // the cell's index + 1 (eval, tests: which cell drew a pixel)
 
 void main() {
-  Cell c = cells[vCell];
+#ifdef PIXEL_RAYS
+  // A deferred pixel (grooves_defer.glsl): the cell its slot holds, along the pixel's ray.
+  int cell, steps;
+  vec3 o, d;
+  if (!deferredRay(cell, steps, o, d)) discard;
+#else
+  int cell = vCell, steps = vSteps;
   vec3 o = vCamFrame;
   vec3 d = normalize(vFrame - vCamFrame);
+#endif
+  Cell c = cells[cell];
   // Slab clip against the box [uMin,uMax] x [vMin,vMax] x [wMin,wMax].
   vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x);
   vec3 bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
 #ifdef MODE_EXTENDS_BOX
-  modeExtendBox(vCell, bmin, bmax);  // a mode whose surface reaches past the height field's box (grooves)
+  modeExtendBox(cell, bmin, bmax);  // a mode whose surface reaches past the height field's box (grooves)
 #endif
   vec3 inv = 1.0 / d;
   vec3 t0 = (bmin - o) * inv, t1 = (bmax - o) * inv;
@@ -81,8 +98,12 @@ void main() {
 
   float tS;
   uint work;
-  bool found = castCell(c, vCell, vSteps, o, d, tEnter, tExit, tS, work);
+  bool found = castCell(c, cell, steps, o, d, tEnter, tExit, tS, work);
+#ifdef PIXEL_RAYS
+  countMore(work, found);
+#else
   count(work, found);
+#endif
   if (!found) discard;
   vec3 hit = o + d * tS;
   // Boundary test (§3.3.1): inside the box (castCell answers only on covered texels).
@@ -107,13 +128,15 @@ void main() {
   gl_FragDepth = nearPlane / viewDepth;  // reverse-Z, matches `projection`
 
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
-  if (shadows) inShadow = shadowRay(c, vCell, hit, normalize(toFrame(c, lightDir)));
+#ifdef SHADOWS
+  if (shadows) inShadow = shadowRay(c, cell, hit, normalize(toFrame(c, lightDir)));
+#endif
   outColor = vec4(shade(albedo, nWorld, world), 1.0);
 #ifdef MODE_POST_SHADE
   // A mode that refines the pixel's colour over its footprint (grooves narrower than ~2 pixels).
-  outColor.rgb = modePostShade(c, vCell, o, d, tS, outColor.rgb);
+  outColor.rgb = modePostShade(c, cell, o, d, tS, outColor.rgb);
 #endif
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), inShadow ? 1.0 : 0.0);
-  outCell = uint(vCell) + 1u;
+  outCell = uint(cell) + 1u;
 }

@@ -1,0 +1,86 @@
+// The grooves mode in two passes (viewer/renderer.cpp drawGrooves). A program's size costs
+// llvmpipe on every pixel it shades, taken branches or not, so the carved cast runs only where
+// it can differ from the height field:
+//   1. the cells with grooves are drawn by the height field's march (GROOVES_DEFER); a pixel whose
+//      hit lies within reach of a groove (the cell's gap field) is not drawn but deferred: its
+//      cell, its class (0: the carved cast, its hit near a capsule; 1: the march's hit stands and
+//      only the anti-aliasing of a narrow groove's footprint changes its colour) and the march's
+//      hit go to one of DEFER_SLOTS slots of the pixel, its 4x4 tile to the list of that slot and
+//      class;
+//   2. each list's tiles are drawn by its class's program (PIXEL_RAYS; class 1 GROOVES_HIT_STANDS),
+//      each pixel for the cell its slot holds (none, or of the other class: discarded at once),
+//      along the pixel's own ray, from the march's hit.
+// A pixel all of whose slots are taken keeps the height field for one more cell (counted).
+
+layout(std430, binding = 2) readonly buffer GrooveField { uint grooveField[]; };  // gcast::gapField
+// Layers: slot 0's cell + 1 (bit 31: class 1), its march's hit (float bits, -1: a miss); slot 1's ...
+layout(binding = 3, r32ui) uniform coherent uimage2DArray deferSlots;
+layout(binding = 4, r32ui) uniform coherent uimage2D deferTiles;       // per 4x4 pixels: bit s, slot s holds one there
+#include "defer_lists.glsl"
+
+const float kGapTexels = 32.0;  // gcast::kGapFieldTexels
+
+// Lower bounds at q (frame) of min over the cell's pieces of (distance to the segment - lip), x,
+// and of (distance - half width), y (gcast::gapField).
+vec2 grooveGap(Cell c, int cell, vec2 q) {
+  uint off = grooveField[cell];
+  ivec2 n = max(ivec2(c.boxW.zw), ivec2(1));
+  vec2 size = c.boxUV.yw - c.boxUV.xz;
+  ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / size * vec2(n))), ivec2(0), n - 1);
+  uint w = grooveField[off + uint(i.y * n.x + i.x)];
+  vec2 texel = size / vec2(n);
+  float quantum = kGapTexels * min(texel.x, texel.y) / 65535.0;
+  // Past the box, the distance to it comes off (the bounds hold over the edge texel's square).
+  float outside = length(max(max(c.boxUV.xz - q, q - c.boxUV.yw), vec2(0.0)));
+  return vec2(float(w & 0xffffu), float(w >> 16u)) * quantum - outside;
+}
+
+#ifdef GROOVES_DEFER
+// Claims a slot of this pixel for the cell; false when all hold other cells.
+bool deferPixel(int cell, uint cls, float tHit) {
+  ivec2 px = ivec2(gl_FragCoord.xy);
+  uint id = (uint(cell) + 1u) | (cls << 31);
+  for (int s = 0; s < DEFER_SLOTS; ++s) {
+    uint old = imageAtomicCompSwap(deferSlots, ivec3(px, 2 * s), 0u, id);
+    if (old != 0u && old != id) continue;
+    imageStore(deferSlots, ivec3(px, 2 * s + 1), uvec4(floatBitsToUint(tHit)));
+    uint list = 2u * uint(s) + cls, bit = 1u << list;
+    if ((imageAtomicOr(deferTiles, px >> 2, bit) & bit) == 0u) {
+      uint k = atomicAdd(deferCmd[4u * list + 1u], 1u);
+      deferTile[list * deferCapacity + k] = (uint(px.y >> 2) << 16) | uint(px.x >> 2);
+    }
+    atomicAdd(deferCount[0], 1u);
+    return true;
+  }
+  atomicAdd(deferCount[1], 1u);
+  return false;
+}
+#endif
+
+#ifdef PIXEL_RAYS
+uniform int deferSlot;
+uniform uint deferClass;
+uniform vec3 rayBase, rayDx, rayDy;  // the pixel's ray (world): rayBase + rayDx x + rayDy y at gl_FragCoord
+
+// The first cast of this pixel's ray takes the march's hit from its slot (then kNotDeferred: a
+// shadow ray marches).
+const float kNotDeferred = -2.0;
+float deferredHit = kNotDeferred;
+
+// The cell this pixel's slot holds (false: none, or one of the other class), the camera and the
+// pixel's ray in its frame.
+bool deferredRay(out int cell, out int steps, out vec3 o, out vec3 d) {
+  ivec2 px = ivec2(gl_FragCoord.xy);
+  uint id = imageLoad(deferSlots, ivec3(px, 2 * deferSlot)).x;
+  if (id == 0u || (id >> 31) != deferClass) return false;
+  cell = int(id & 0x7fffffffu) - 1;
+  steps = 0;
+  deferredHit = uintBitsToFloat(imageLoad(deferSlots, ivec3(px, 2 * deferSlot + 1)).x);
+  Cell c = cells[cell];
+  vec3 rel = cellRelativeToCamera(c);
+  o = -vec3(dot(rel, c.axisU.xyz), dot(rel, c.axisV.xyz), dot(rel, c.axisW.xyz));
+  vec3 w = rayBase + rayDx * gl_FragCoord.x + rayDy * gl_FragCoord.y;
+  d = normalize(vec3(dot(w, c.axisU.xyz), dot(w, c.axisV.xyz), dot(w, c.axisW.xyz)));
+  return true;
+}
+#endif
