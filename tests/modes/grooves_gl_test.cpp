@@ -188,6 +188,13 @@ class GroovesGl : public test::GlTest {
     return dir.file("plane.hfa");
   }
 
+  // The plane with grooves of `width`, opened and uploaded.
+  void openPlane(const test::TempDir& dir, double width, PackReader& p, Renderer& r) {
+    ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
+    ASSERT_TRUE(r.init(p).isOk());
+    ASSERT_TRUE(r.modeReady(RenderMode::kGrooves));
+  }
+
   FrameResult render(Renderer& r, const Camera& cam, RenderMode mode, bool aa = true) {
     RenderSettings rs;
     rs.mode = mode;
@@ -236,10 +243,8 @@ TEST_F(GroovesGl, DepthMatchesTheCarvedMeshAt20And2And03Pixels) {
     const double width = widthFor(cam, px);
     test::TempDir dir;
     PackReader p;
-    ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
     Renderer r;
-    ASSERT_TRUE(r.init(p).isOk());
-    ASSERT_TRUE(r.modeReady(RenderMode::kGrooves));
+    ASSERT_NO_FATAL_FAILURE(openPlane(dir, width, p, r));
     const TriangleMesh mesh = carvedMesh(width);
     const std::vector<float> ref = referenceDepth(mesh, cam);
     const FrameResult g = render(r, cam, RenderMode::kGrooves), par = render(r, cam, RenderMode::kParallax);
@@ -273,9 +278,8 @@ TEST_F(GroovesGl, ShadowsFallInsideTheGroovesAsOnTheCarvedSurface) {
   const double width = widthFor(cam, 20);
   test::TempDir dir;
   PackReader p;
-  ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
   Renderer r;
-  ASSERT_TRUE(r.init(p).isOk());
+  ASSERT_NO_FATAL_FAILURE(openPlane(dir, width, p, r));
   RenderSettings rs;
   rs.shadows = true;
   rs.headLight = false;
@@ -331,9 +335,8 @@ TEST_F(GroovesGl, NarrowGroovesAreAntiAliasedLikeSupersampling) {
   const double width = widthFor(cam, 0.3);
   test::TempDir dir;
   PackReader p;
-  ASSERT_TRUE(p.open(makePack(dir, width)).isOk());
   Renderer r;
-  ASSERT_TRUE(r.init(p).isOk());
+  ASSERT_NO_FATAL_FAILURE(openPlane(dir, width, p, r));
   const FrameResult aa = render(r, cam, RenderMode::kGrooves, true), one = render(r, cam, RenderMode::kGrooves, false);
   // 16 samples a pixel (4 x 4) of the carved mesh, shaded as the viewer shades.
   Camera big = cam;
