@@ -117,41 +117,83 @@ void GridKnn::forCells(const int64_t a[3], const int64_t b[3], F visit) const {
 
 void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
   out.index.clear();
-  out.xyz.clear();
+  out.x.clear(), out.y.clear(), out.z.clear();
   int64_t a[3], b[3];
   for (int k = 0; k < 3; ++k) a[k] = std::max<int64_t>(0, c[k] - ring), b[k] = std::min(dims_[k] - 1, c[k] + ring);
   forCells(a, b, [&](const Cell& cc) {
     out.index.insert(out.index.end(), order_.begin() + cc.begin, order_.begin() + cc.end);
-    out.xyz.insert(out.xyz.end(), sorted_.begin() + 3 * long(cc.begin), sorted_.begin() + 3 * long(cc.end));
+    for (uint32_t o = cc.begin; o < cc.end; ++o) {
+      const double* q = &sorted_[3 * size_t(o)];
+      out.x.push_back(q[0]), out.y.push_back(q[1]), out.z.push_back(q[2]);
+    }
   });
+}
+
+// The m = min(k, candidates) smallest (d2, index) of `from` into best (ascending) when at least m
+// lie within b2; false otherwise. The distances come first, in one loop the compiler vectorizes;
+// then a histogram of 32 buckets over [0, b2] (or over [0, the farthest] for an unbounded ask)
+// finds the bucket of the m-th, and only the candidates up to that bucket are selected and
+// sorted. The selection was most of a query; on a surface the count grows with d2, so the
+// buckets hold about equally many and a query sorts about k + k / 10 instead of 3k. Exact: the
+// bucket of a distance never decreases as the distance grows, so every candidate left out is
+// farther than every one kept.
+bool GridKnn::select(const double* p, Candidates& from, int k, double b2,
+                     std::vector<std::pair<double, uint32_t>>& best) const {
+  const size_t nc = from.index.size(), m = std::min(nc, size_t(k));
+  best.clear();
+  from.d2.resize(nc);
+  const double px = p[0], py = p[1], pz = p[2];
+  const double *x = from.x.data(), *y = from.y.data(), *z = from.z.data();
+  double* d2 = from.d2.data();
+  double far = 0;
+  for (size_t j = 0; j < nc; ++j) {
+    const double dx = x[j] - px, dy = y[j] - py, dz = z[j] - pz;
+    d2[j] = dx * dx + dy * dy + dz * dz;
+  }
+  if (!(b2 < std::numeric_limits<double>::infinity())) {
+    for (size_t j = 0; j < nc; ++j) far = std::max(far, d2[j]);
+    b2 = far;
+  }
+  constexpr int kBuckets = 32;
+  const double scale = b2 > 0 ? kBuckets / b2 : 0;
+  // Bucket of each candidate (kBuckets: beyond b2, never taken; one just past b2 may land in the
+  // last bucket, which keeps the answer exact: only the buckets' order matters).
+  from.bucket.resize(nc);
+  uint16_t* bk = from.bucket.data();
+  uint32_t count[kBuckets + 1] = {};
+  for (size_t j = 0; j < nc; ++j) {
+    const double f = d2[j] * scale;
+    const int b = f < kBuckets ? int(f) : (d2[j] <= b2 ? kBuckets - 1 : kBuckets);
+    bk[j] = uint16_t(b);
+    ++count[b];
+  }
+  int last = 0;  // the bucket the m-th lies in
+  for (size_t sum = 0; last < kBuckets; ++last)
+    if ((sum += count[last]) >= m) break;
+  if (last == kBuckets) return false;  // fewer than m within b2
+  best.resize(nc);
+  size_t kept = 0;
+  for (size_t j = 0; j < nc; ++j) {  // branch-free: every candidate written, the kept ones advance
+    best[kept] = {d2[j], from.index[j]};
+    kept += bk[j] <= last;
+  }
+  best.resize(kept);
+  if (m < best.size()) std::nth_element(best.begin(), best.begin() + long(m - 1), best.end());
+  best.resize(m);
+  std::sort(best.begin(), best.end());
+  return true;
 }
 
 // The k smallest (d2, index) of point i over `cand` into scratch (ascending), then, where the
 // candidates cannot prove it (the k-th lies beyond the gathered block), wider rings and at last
 // every cell, pruned by distance.
-void GridKnn::nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
+void GridKnn::nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
                       double bound2) const {
   const double* p = pos_ + 3 * i;
   // The k smallest of the candidates within bound2 if there are k of them (every candidate
-  // left out is then farther than all kept), else of all: the selection is most of a query's
-  // cost, and a good bound leaves it half the candidates.
-  auto collect = [&](const Candidates& from, double b2) {
-    const size_t nc = from.index.size(), m = std::min(nc, size_t(k));
-    best.clear();
-    const double* q = from.xyz.data();
-    for (size_t j = 0; j < nc; ++j, q += 3) {
-      const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
-      const double d2 = dx * dx + dy * dy + dz * dz;
-      if (d2 <= b2) best.emplace_back(d2, from.index[j]);
-    }
-    if (best.size() < m) return false;
-    if (m < best.size()) std::nth_element(best.begin(), best.begin() + long(m - 1), best.end());
-    best.resize(m);
-    std::sort(best.begin(), best.end());
-    return true;
-  };
+  // left out is then farther than all kept), else of all.
   const double all = std::numeric_limits<double>::infinity();
-  if (!collect(cand, bound2)) collect(cand, all);
+  if (!select(p, cand, k, bound2, best)) select(p, cand, k, all, best);
   int64_t c[3];
   coords(i, c);
   const size_t want = std::min(n_, size_t(k));
@@ -169,7 +211,7 @@ void GridKnn::nearest(size_t i, const Candidates& cand, int k, std::vector<std::
   Candidates more;
   for (int ring = 2; ring <= kMaxRing; ++ring) {
     gather(c, ring, more);
-    collect(more, all);
+    select(p, more, k, all, best);
     if (proven(ring)) return;
   }
   // Far from everything (an outlier, a sparse fringe): every cell that can hold a closer point.

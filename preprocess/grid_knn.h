@@ -55,7 +55,9 @@ class GridKnn {
   void coords(size_t i, int64_t c[3]) const;
   struct Candidates {
     std::vector<uint32_t> index;
-    std::vector<double> xyz;  // their positions, contiguous (the loop over them stays in cache)
+    std::vector<double> x, y, z;  // their positions, one array per axis (the distances vectorize)
+    std::vector<double> d2;       // scratch: their squared distances to the point asked about
+    std::vector<uint16_t> bucket; // scratch: the distances' histogram buckets
   };
   // visit(cell) for every non-empty cell of the block [a, b] (cell coordinates, inclusive).
   template <class F>
@@ -65,7 +67,8 @@ class GridKnn {
   // bound2: a guess at the k-th squared distance (a neighbour's k-th distance plus the distance
   // to it); candidates beyond it are skipped unless that leaves fewer than k. Any value gives the
   // exact answer; a good one only makes it faster.
-  void nearest(size_t i, const Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
+  bool select(const double* p, Candidates& from, int k, double b2, std::vector<std::pair<double, uint32_t>>& best) const;
+  void nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
                double bound2 = std::numeric_limits<double>::infinity()) const;
 
   const double* pos_;
