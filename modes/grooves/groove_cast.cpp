@@ -1,6 +1,7 @@
 #include "modes/grooves/groove_cast.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -679,13 +680,17 @@ double gapQuantum(const CellRecord& c) {
 
 // One cell's field: at each texel's centre the least (distance - lip) and (distance - half width)
 // over the pieces within the cap's reach of it, less half the texel's diagonal (the bounds over its
-// square: distance is 1-Lipschitz) and a thousandth of a texel (the shader's float arithmetic).
+// square: distance is 1-Lipschitz) and a thousandth of a texel (the shader's float arithmetic);
+// and the two pieces of least (distance - half width) there (the anti-aliasing's candidates).
 static void cellGapField(const CellRecord& c, const CellPieces& cp, uint32_t* out) {
   const int W = std::max<int>(c.tileW, 1), H = std::max<int>(c.tileH, 1);
   const double tu = (c.box[1] - c.box[0]) / W, tv = (c.box[3] - c.box[2]) / H;
   const double half = 0.5 * std::hypot(tu, tv), q = gapQuantum(c), cap = 65535.0 * q;
   std::vector<double> lip(size_t(W) * H, cap + half + 1), width(lip);
-  for (const Piece& p : cp.pieces) {
+  std::vector<std::array<std::pair<double, uint32_t>, 2>> near(size_t(W) * H);
+  for (auto& n : near) n.fill({std::numeric_limits<double>::infinity(), kNoEntry});
+  for (uint32_t pi = 0; pi < cp.pieces.size(); ++pi) {
+    const Piece& p = cp.pieces[pi];
     const Eigen::Vector2d b = p.a + p.e * p.length;
     const double r = std::max(p.lip, p.halfWidth) + cap + half;
     const int i0 = std::max(0, int(std::floor((std::min(p.a.x(), b.x()) - r - c.box[0]) / tu))),
@@ -700,6 +705,13 @@ static void cellGapField(const CellRecord& c, const CellPieces& cp, uint32_t* ou
         const size_t k = size_t(j) * W + i;
         lip[k] = std::min(lip[k], d - p.lip);
         width[k] = std::min(width[k], d - p.halfWidth);
+        const std::pair<double, uint32_t> e(d - p.halfWidth, pi);
+        if (e < near[k][0]) {
+          near[k][1] = near[k][0];
+          near[k][0] = e;
+        } else if (e < near[k][1]) {
+          near[k][1] = e;
+        }
       }
   }
   const double margin = half + 1e-3 * std::min(tu, tv);
@@ -707,7 +719,11 @@ static void cellGapField(const CellRecord& c, const CellPieces& cp, uint32_t* ou
     const double v = (gap - margin) / q;
     return v <= 0 ? 0u : v >= 65535 ? 65535u : uint32_t(std::floor(v));
   };
-  for (size_t k = 0; k < lip.size(); ++k) out[k] = code(lip[k]) | code(width[k]) << 16;
+  for (size_t k = 0; k < lip.size(); ++k) {
+    out[kGapFieldWords * k] = code(lip[k]) | code(width[k]) << 16;
+    out[kGapFieldWords * k + 1] = near[k][0].second;
+    out[kGapFieldWords * k + 2] = near[k][1].second;
+  }
 }
 
 std::vector<uint32_t> gapField(const PackReader& pack, const Model& m) {
@@ -717,7 +733,7 @@ std::vector<uint32_t> gapField(const PackReader& pack, const Model& m) {
     const CellRecord& c = cells[cp.cell];
     const size_t texels = size_t(std::max<int>(c.tileW, 1)) * std::max<int>(c.tileH, 1);
     words[cp.cell] = uint32_t(words.size());
-    words.resize(words.size() + texels, 0u);
+    words.resize(words.size() + kGapFieldWords * texels, 0u);
     cellGapField(c, cp, words.data() + words[cp.cell]);
   }
   return words;

@@ -123,11 +123,15 @@ Model modelFromSection(const PackReader& pack, const SectionView& v);
 // - its lip) and of (distance - its half width), in frame units: where they exceed the reach of
 // every rule that can change a pixel (the capsule and the stretch a floor above h is searched
 // over; the anti-aliasing's footprint), the carved cast's answer is the height field's. Clamped to
-// kGapFieldTexels texels (a larger reach reads the cap and takes the carved cast). Words: per pack
-// cell the first word of its field (kNoEntry: none), then the fields, row-major (u fastest), a
-// word a texel: the lip's bound in the low 16 bits, the half width's in the high, each in units of
-// gapQuantum(cell), rounded down.
+// kGapFieldTexels texels (a larger reach reads the cap and takes the carved cast). With them, the
+// two pieces of least (distance - half width) at the texel's centre: the anti-aliasing's
+// candidates (modePostShade), read instead of searching the bins around every pixel. Words: per
+// pack cell the first word of its field (kNoEntry: none), then the fields, row-major (u fastest),
+// kGapFieldWords words a texel: the lip's bound in the low 16 bits and the half width's in the
+// high, each in units of gapQuantum(cell), rounded down; the nearest piece's index in the cell
+// (kNoEntry: none within the cap's reach); the second nearest's.
 inline constexpr double kGapFieldTexels = 32;
+inline constexpr size_t kGapFieldWords = 3;
 double gapQuantum(const CellRecord& c);
 std::vector<uint32_t> gapField(const PackReader& pack, const Model& m);
 

@@ -514,44 +514,36 @@ vec3 gFootprintSample(Cell c, GPiece p, vec3 C, float ra, float rx, vec3 o, vec3
 }
 
 // Anti-aliasing of grooves narrower than two pixels (003 eq. 6's footprint area ratios, integrated
-// numerically): the narrow piece nearest the hit whose capsule the pixel's footprint reaches;
-// grooveSamples rays spread across it over the pixel (weights: the pixel square's chord lengths
-// across the groove's screen direction), each followed down the groove's profile in its
-// cross-section and shaded where it lands; their weighted mean is the pixel's colour. (Only the
-// nearest groove: where two narrow ones cross inside a pixel, one of them.)
+// numerically): of the two pieces nearest the hit's texel (the gap field's candidates: a search
+// of the bins around every pixel cost llvmpipe more than the rays below), the narrow one nearest
+// the hit whose capsule the pixel's footprint reaches; grooveSamples rays spread across it over
+// the pixel (weights: the pixel square's chord lengths across the groove's screen direction),
+// each followed down the groove's profile in its cross-section and shaded where it lands; their
+// weighted mean is the pixel's colour. (Only one groove: where two narrow ones cross inside a
+// pixel, one of them.)
 vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   uint blk = grooveEntry[cell];
   if (!grooveAA || blk == kNoGrooves) return color;
   vec3 hit = o + d * tS;
   float foot = tS * pixelAngle;  // a pixel across the ray at the hit
   float reach = gFootprintReach(tS, d);
-  int G = int(grooveWord[blk]);
-  vec2 span = (c.boxUV.yw - c.boxUV.xz) / float(G);
+  uvec2 near = grooveNear(c, cell, hit.xy);
   int best = -1;
   float bestGap = 1e30;
-  ivec2 b0 = clamp(ivec2(floor((hit.xy - reach - c.boxUV.xz) / span)), ivec2(0), ivec2(G - 1));
-  ivec2 b1 = clamp(ivec2(floor((hit.xy + reach - c.boxUV.xz) / span)), ivec2(0), ivec2(G - 1));
-  b1 = min(b1, b0 + 2);
-  for (int by = b0.y; by <= b1.y; ++by)
-    for (int bx = b0.x; bx <= b1.x; ++bx) {
-      uint b = uint(by * G + bx);
-      uint start = grooveWord[blk + 6u + 2u * b], n = grooveWord[blk + 7u + 2u * b];
-      uint list = blk + grooveWord[blk + 2u] + start;
-      for (uint k = 0u; k < n; ++k) {
-        uint i = grooveWord[list + k];
-        GPiece p = gPiece(blk, i);
-        float s, x;
-        float gap = gDist(p, hit.xy, s, x) - p.hw;
-        vec2 gr;
-        gRim(p, s, x, gr);
-        vec3 a3 = vec3(-p.e.y, p.e.x, dot(gr, vec2(-p.e.y, p.e.x)));
-        float wpx = 2.0 * p.hw * length(a3 - d * dot(a3, d)) / foot;
-        if (wpx < 2.0 && gap < reach && gap < bestGap) {
-          best = int(i);
-          bestGap = gap;
-        }
-      }
+  for (int k = 0; k < 2; ++k) {
+    if (near[k] == kNoGrooves) continue;
+    GPiece p = gPiece(blk, near[k]);
+    float s, x;
+    float gap = gDist(p, hit.xy, s, x) - p.hw;
+    vec2 gr;
+    gRim(p, s, x, gr);
+    vec3 a3 = vec3(-p.e.y, p.e.x, dot(gr, vec2(-p.e.y, p.e.x)));
+    float wpx = 2.0 * p.hw * length(a3 - d * dot(a3, d)) / foot;
+    if (wpx < 2.0 && gap < reach && gap < bestGap) {
+      best = int(near[k]);
+      bestGap = gap;
     }
+  }
   if (best < 0) return color;
   GPiece p = gPiece(blk, uint(best));
   float s0, x0;

@@ -19,16 +19,27 @@ layout(binding = 4, r32ui) uniform coherent uimage2D deferTiles;       // per 4x
 #include "defer_lists.glsl"
 
 const float kGapTexels = 32.0;  // gcast::kGapFieldTexels
+const uint kGapWords = 3u;      // gcast::kGapFieldWords
+
+// The first word of the field's texel under q (frame; clamped to the tile).
+uint grooveFieldTexel(Cell c, int cell, vec2 q) {
+  ivec2 n = max(ivec2(c.boxW.zw), ivec2(1));
+  ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * vec2(n))), ivec2(0), n - 1);
+  return grooveField[cell] + kGapWords * uint(i.y * n.x + i.x);
+}
+
+// The two pieces nearest the centre of the texel under q by (distance - half width) (~0u: none).
+uvec2 grooveNear(Cell c, int cell, vec2 q) {
+  uint w = grooveFieldTexel(c, cell, q);
+  return uvec2(grooveField[w + 1u], grooveField[w + 2u]);
+}
 
 // Lower bounds at q (frame) of min over the cell's pieces of (distance to the segment - lip), x,
 // and of (distance - half width), y (gcast::gapField).
 vec2 grooveGap(Cell c, int cell, vec2 q) {
-  uint off = grooveField[cell];
-  ivec2 n = max(ivec2(c.boxW.zw), ivec2(1));
+  uint w = grooveField[grooveFieldTexel(c, cell, q)];
   vec2 size = c.boxUV.yw - c.boxUV.xz;
-  ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / size * vec2(n))), ivec2(0), n - 1);
-  uint w = grooveField[off + uint(i.y * n.x + i.x)];
-  vec2 texel = size / vec2(n);
+  vec2 texel = size / vec2(max(ivec2(c.boxW.zw), ivec2(1)));
   float quantum = kGapTexels * min(texel.x, texel.y) / 65535.0;
   // Past the box, the distance to it comes off (the bounds hold over the edge texel's square).
   float outside = length(max(max(c.boxUV.xz - q, q - c.boxUV.yw), vec2(0.0)));

@@ -149,7 +149,8 @@ TEST(GrooveSection, CorruptionIsRefused) {
 // The two-pass renderer skips the carved cast where the gap field says no capsule is near: the
 // field must never exceed the true gap (distance to a piece's segment less its lip, or less its
 // half width) anywhere in a texel, and should be within a texel of it (else pixels are deferred
-// for nothing); past the cap it reads the cap.
+// for nothing); past the cap it reads the cap. Its texels also name the anti-aliasing's two
+// candidates, which must be the two pieces nearest the texel's centre.
 TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
   Fixture f;
   makePlane(f);
@@ -157,7 +158,7 @@ TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
   const std::vector<uint32_t> words = gcast::gapField(f.pack, f.model);
   ASSERT_EQ(words.size() >= f.pack.cells().size(), true);
   std::mt19937 rng(5);
-  size_t points = 0, capped = 0;
+  size_t points = 0, capped = 0, candidates = 0;
   double worstSlack = 0;
   for (const gcast::CellPieces& cp : f.model.cells) {
     const CellRecord& c = f.pack.cells()[cp.cell];
@@ -167,14 +168,27 @@ TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
     for (int k = 0; k < 20000; ++k) {
       const Eigen::Vector2d p(U(rng), V(rng));
       const int i = std::clamp(int((p.x() - c.box[0]) / tu), 0, c.tileW - 1), j = std::clamp(int((p.y() - c.box[2]) / tv), 0, c.tileH - 1);
-      const uint32_t w = words[words[cp.cell] + size_t(j) * c.tileW + i];
+      const size_t texel = words[cp.cell] + gcast::kGapFieldWords * (size_t(j) * c.tileW + i);
+      const uint32_t w = words[texel];
       double lip = 1e300, width = 1e300;
-      for (const gcast::Piece& pc : cp.pieces) {
+      // The anti-aliasing's candidates: the two pieces of least (distance - half width) at the
+      // texel's centre (where one is within the cap's reach).
+      const Eigen::Vector2d ctr(c.box[0] + (i + 0.5) * tu, c.box[2] + (j + 0.5) * tv);
+      std::vector<std::pair<double, uint32_t>> byWidth;
+      for (uint32_t pi = 0; pi < cp.pieces.size(); ++pi) {
+        const gcast::Piece& pc = cp.pieces[pi];
         double s, x;
         const double d = gcast::pieceDistance(pc, p, s, x);
         lip = std::min(lip, d - pc.lip);
         width = std::min(width, d - pc.halfWidth);
+        byWidth.emplace_back(gcast::pieceDistance(pc, ctr, s, x) - pc.halfWidth, pi);
       }
+      std::sort(byWidth.begin(), byWidth.end());
+      if (byWidth[0].first < 65535 * q) {
+        ASSERT_EQ(words[texel + 1], byWidth[0].second) << "at " << ctr.transpose();
+        if (byWidth.size() > 1 && byWidth[1].first < 65535 * q) ASSERT_EQ(words[texel + 2], byWidth[1].second);
+      }
+      candidates += words[texel + 1] != gcast::kNoEntry;
       const double bLip = (w & 0xffff) * q, bWidth = (w >> 16) * q;
       ASSERT_LE(bLip, std::max(lip, 0.0) + 1e-12) << "at " << p.transpose();
       ASSERT_LE(bWidth, std::max(width, 0.0) + 1e-12) << "at " << p.transpose();
@@ -187,9 +201,10 @@ TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
       }
     }
   }
-  std::printf("[groove-gap] %zu points in %zu cells: %zu past the cap; the bound at most %.2f texels under the gap\n", points,
-              f.model.cells.size(), capped, worstSlack);
+  std::printf("[groove-gap] %zu points in %zu cells: %zu past the cap, %zu with a nearest piece; the bound at most %.2f texels under the gap\n",
+              points, f.model.cells.size(), capped, candidates, worstSlack);
   EXPECT_GT(capped, 0u);
+  EXPECT_GT(candidates, points / 4);
   EXPECT_LE(worstSlack, 1.5);
 }
 
