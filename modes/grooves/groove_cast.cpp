@@ -678,6 +678,22 @@ double gapQuantum(const CellRecord& c) {
   return kGapFieldTexels * std::min(tu, tv) / 65535.0;
 }
 
+double widestAcross(const CellPieces& cp) {
+  double wide = 0;
+  for (const Piece& p : cp.pieces) {
+    // The rim's slope across is bilinear in (position along, x): its extremes lie at the corners,
+    // x at the lips, along from a piece length before the start to one past the end.
+    double slope = 0;
+    for (double fs : {-1.0, 2.0})
+      for (double xc : {-p.lip, p.lip}) {
+        const double d0 = p.rimQ[0][1] + 2 * p.rimQ[0][2] * xc, d1 = p.rimQ[1][1] + 2 * p.rimQ[1][2] * xc;
+        slope = std::max(slope, std::abs(d0 + (d1 - d0) * (p.length > 0 ? fs : 0.0)));
+      }
+    wide = std::max(wide, 2 * p.halfWidth * std::sqrt(1 + slope * slope));
+  }
+  return wide * (1 + 1e-6);
+}
+
 // One cell's field: at each texel's centre the least (distance - lip) and (distance - half width)
 // over the pieces within the cap's reach of it, less half the texel's diagonal (the bounds over its
 // square: distance is 1-Lipschitz) and a thousandth of a texel (the shader's float arithmetic);
@@ -719,10 +735,12 @@ static void cellGapField(const CellRecord& c, const CellPieces& cp, uint32_t* ou
     const double v = (gap - margin) / q;
     return v <= 0 ? 0u : v >= 65535 ? 65535u : uint32_t(std::floor(v));
   };
+  const float wide = float(widestAcross(cp));
+  std::memcpy(out, &wide, 4);
   for (size_t k = 0; k < lip.size(); ++k) {
-    out[kGapFieldWords * k] = code(lip[k]) | code(width[k]) << 16;
-    out[kGapFieldWords * k + 1] = near[k][0].second;
-    out[kGapFieldWords * k + 2] = near[k][1].second;
+    out[1 + kGapFieldWords * k] = code(lip[k]) | code(width[k]) << 16;
+    out[1 + kGapFieldWords * k + 1] = near[k][0].second;
+    out[1 + kGapFieldWords * k + 2] = near[k][1].second;
   }
 }
 
@@ -733,7 +751,7 @@ std::vector<uint32_t> gapField(const PackReader& pack, const Model& m) {
     const CellRecord& c = cells[cp.cell];
     const size_t texels = size_t(std::max<int>(c.tileW, 1)) * std::max<int>(c.tileH, 1);
     words[cp.cell] = uint32_t(words.size());
-    words.resize(words.size() + kGapFieldWords * texels, 0u);
+    words.resize(words.size() + 1 + kGapFieldWords * texels, 0u);
     cellGapField(c, cp, words.data() + words[cp.cell]);
   }
   return words;

@@ -126,13 +126,18 @@ Model modelFromSection(const PackReader& pack, const SectionView& v);
 // kGapFieldTexels texels (a larger reach reads the cap and takes the carved cast). With them, the
 // two pieces of least (distance - half width) at the texel's centre: the anti-aliasing's
 // candidates (modePostShade), read instead of searching the bins around every pixel. Words: per
-// pack cell the first word of its field (kNoEntry: none), then the fields, row-major (u fastest),
-// kGapFieldWords words a texel: the lip's bound in the low 16 bits and the half width's in the
-// high, each in units of gapQuantum(cell), rounded down; the nearest piece's index in the cell
-// (kNoEntry: none within the cap's reach); the second nearest's.
+// pack cell the first word of its field (kNoEntry: none), then the fields: widestAcross(cell) as
+// an f32, then row-major (u fastest) kGapFieldWords words a texel: the lip's bound in the low 16
+// bits and the half width's in the high, each in units of gapQuantum(cell), rounded down; the
+// nearest piece's index in the cell (kNoEntry: none within the cap's reach); the second nearest's.
 inline constexpr double kGapFieldTexels = 32;
 inline constexpr size_t kGapFieldWords = 3;
 double gapQuantum(const CellRecord& c);
+// The most any of the cell's pieces can measure across as seen from any direction (frame units):
+// twice its half width over the cosine of the rim's steepest slope across. Where a pixel is wider
+// than that the footprint's rays draw every groove there, and the first pass need not defer to
+// the carved cast.
+double widestAcross(const CellPieces& cp);
 std::vector<uint32_t> gapField(const PackReader& pack, const Model& m);
 
 // --- the cast (the shader's grooves.glsl in double) ---

@@ -284,6 +284,13 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     vec2 gap = grooveGap(c, cell, (o + d * tHit).xy);
     carve = gap.x <= window;
     footprint = grooveAA && gap.y <= gFootprintReach(tHit, d);
+    // Every groove of the cell narrower than two pixels here: the footprint's rays draw them all
+    // and its centre ray finds the depth (class 1); no floor rises above h, so the height field's
+    // hit is where the ray meets the surface around the groove.
+    if (carve && grooveAA && rise == 0.0 && grooveWidest(cell) < 2.0 * tHit * pixelAngle) {
+      carve = false;
+      footprint = true;
+    }
   }
   if (!(carve || footprint) || !deferPixel(cell, carve ? 0u : 1u, hit ? tHit : -1.0)) return hit;
   return false;  // counted as a ray with the march's work here; the second pass adds its own
@@ -298,6 +305,116 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) { return parallaxShadowRay(c, p
 void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
   uint blk = grooveEntry[cell];
   if (blk != kNoGrooves) bmin.z = min(bmin.z, gWordF(blk + 4u));
+}
+
+// The piece the anti-aliasing draws at the hit tS (-1: none): of the two pieces nearest the hit's
+// texel (the gap field's candidates: a search of the bins around every pixel cost llvmpipe more
+// than the footprint's rays), the one of least (distance - half width) that is under two pixels
+// wide as seen along d and whose half width the pixel's footprint reaches. Kept in aaPiece for
+// modePostShade.
+const int kAAUnknown = -2;
+int aaPiece = kAAUnknown;
+int gAAPiece(Cell c, int cell, vec3 o, vec3 d, float tS) {
+  uint blk = grooveEntry[cell];
+  vec3 hit = o + d * tS;
+  float foot = tS * pixelAngle;  // a pixel across the ray at the hit
+  float reach = gFootprintReach(tS, d);
+  uvec2 near = grooveNear(c, cell, hit.xy);
+  int best = -1;
+  float bestGap = 1e30;
+  for (int k = 0; k < 2; ++k) {
+    if (near[k] == kNoGrooves) continue;
+    GPiece p = gPiece(blk, near[k]);
+    float s, x;
+    float gap = gDist(p, hit.xy, s, x) - p.hw;
+    vec2 gr;
+    gRim(p, s, x, gr);
+    vec3 a3 = vec3(-p.e.y, p.e.x, dot(gr, vec2(-p.e.y, p.e.x)));
+    float wpx = 2.0 * p.hw * length(a3 - d * dot(a3, d)) / foot;
+    if (wpx < 2.0 && gap < reach && gap < bestGap) {
+      best = int(near[k]);
+      bestGap = gap;
+    }
+  }
+  aaPiece = best;
+  return best;
+}
+
+// Piece p's cross-section at q: the rim's point C over the centre line and its slopes along (ra)
+// and across (rx) there.
+void gSection(GPiece p, vec2 q, out vec3 C, out float ra, out float rx) {
+  float s0, x0;
+  vec2 gr;
+  gDist(p, q, s0, x0);
+  s0 = clamp(s0, 0.0, p.len);
+  float z0 = gRim(p, s0, 0.0, gr);
+  ra = dot(gr, p.e);
+  rx = dot(gr, vec2(-p.e.y, p.e.x));
+  C = vec3(p.a + p.e * s0, z0);
+}
+
+// Where the ray o + t dk lands in a narrow groove's cross-section (its profile on the rim's tangent
+// plane through C, the groove straight over the pixel): the ray meets the rim plane at xk across
+// the line, then goes down the profile to the first facet it reaches (masking: a ray enters
+// between the walls and meets the far one). Returns its t (-1: it does not meet the plane) and the
+// facet's slope across there (dDdx; 0 outside the half width, where it lands on the rim plane).
+float gFootprintLand(GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, out float xk, out float dDdx) {
+  vec2 n = vec2(-p.e.y, p.e.x);
+  vec3 N = vec3(-(ra * p.e + rx * n), 1.0);
+  float den = dot(N, dk);
+  xk = 1e30;
+  dDdx = 0.0;
+  if (abs(den) < 1e-12) return -1.0;
+  float t = dot(N, C - o) / den;
+  if (t <= 0.0) return -1.0;
+  vec3 P = o + dk * t;
+  xk = dot(P.xy - C.xy, n);
+  if (abs(xk) < p.hw) {
+    float dx = dot(dk.xy, n), dz = dk.z - ra * dot(dk.xy, p.e) - rx * dx;  // per unit along the ray, below the rim plane
+    float xh = xk, sl;
+    if (abs(dx) > 1e-7 * abs(dz)) {
+      // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between knots.
+      float k = dz / dx, step = p.hw / 8.0, dir = sign(dx);
+      float x0 = xk;
+      float f0 = gDepth(p.prof, abs(x0), p.hw, sl);
+      xh = dir * p.hw;
+      for (int m = 0; m < 17; ++m) {
+        // The next knot (or the far edge) in the ray's direction.
+        float x1 = dir > 0.0 ? min(floor(x0 / step + 1e-4) * step + step, p.hw) : max(ceil(x0 / step - 1e-4) * step - step, -p.hw);
+        float f1 = (x1 - xk) * k + gDepth(p.prof, abs(x1), p.hw, sl);
+        if (f1 <= 0.0) {
+          xh = x0 + (x1 - x0) * f0 / max(f0 - f1, 1e-30);
+          break;
+        }
+        if (abs(x1) >= p.hw) break;
+        x0 = x1;
+        f0 = f1;
+      }
+      t += (xh - xk) / dx;
+    } else {
+      t += gDepth(p.prof, abs(xk), p.hw, sl) / max(-dz, 1e-30);  // straight down the groove
+    }
+    float sm = gSmoothSlope(p.prof, abs(xh), p.hw);
+    dDdx = xh < 0.0 ? -sm : sm;
+  }
+  return t;
+}
+
+// A class-1 pixel's surface (the second pass, GROOVES_HIT_STANDS): the march's hit tS, unless the
+// anti-aliasing's narrow piece is under it and the pixel's centre ray lands inside that piece's
+// capsule: then the landing (the profile, or the rim out to the lips), with its facet's normal.
+float gNarrowLanding(Cell c, int cell, vec3 o, vec3 d, float tS) {
+  int best = gAAPiece(c, cell, o, d, tS);
+  if (best < 0) return tS;
+  GPiece p = gPiece(grooveEntry[cell], uint(best));
+  vec3 C;
+  float ra, rx, xk, dDdx;
+  gSection(p, (o + d * tS).xy, C, ra, rx);
+  float t = gFootprintLand(p, C, ra, rx, o, d, xk, dDdx);
+  if (t < 0.0 || !(abs(xk) < p.lip)) return tS;
+  castNormal = normalize(vec3(-(p.e * ra + vec2(-p.e.y, p.e.x) * (rx - dDdx)), 1.0));
+  castHasNormal = true;
+  return t;
 }
 
 // The first t in [t0, t1] where the ray is on or under piece p's floor inside its capsule, -1 when
@@ -323,10 +440,12 @@ float gFloorCrossing(Cell c, GPiece p, vec3 o, vec3 d, float t0, float t1) {
 // goes on from there.
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
 #ifdef GROOVES_HIT_STANDS
-  // The second pass's class 1: the march's hit is the surface (only modePostShade has work).
+  // The second pass's class 1: the march's hit is the surface, or where a narrow groove is under
+  // the pixel, the centre ray's landing in its cross-section (modePostShade draws the colour).
   tHit = deferredHit;
   work = 0u;
   deferredHit = kNotDeferred;
+  if (tHit >= 0.0) tHit = gNarrowLanding(c, cell, o, d, tHit);
   return tHit >= 0.0;
 #else
   uint blk = grooveEntry[cell];
@@ -467,91 +586,33 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
   return r;
 }
 
-// The colour of one ray of a narrow groove's footprint, in the groove's cross-section (its profile
-// on the rim's tangent plane at the pixel, the groove straight over the pixel): where the ray
-// meets the rim plane, then down its profile to the first facet it reaches (masking: a ray enters
-// between the walls and meets the far one), shaded with that facet's normal; outside the
-// profile, the rim's surface.
+// The colour of one ray of a narrow groove's footprint: where it lands in the cross-section
+// (gFootprintLand), shaded with that facet's normal; outside the profile, the rim's surface.
 vec3 gFootprintSample(Cell c, GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, vec3 albedo, vec3 world) {
-  vec2 n = vec2(-p.e.y, p.e.x);
-  vec3 N = vec3(-(ra * p.e + rx * n), 1.0);
-  float den = dot(N, dk);
-  if (abs(den) < 1e-12) return vec3(-1.0);
-  float t = dot(N, C - o) / den;
-  if (t <= 0.0) return vec3(-1.0);
-  vec3 P = o + dk * t;
-  float xk = dot(P.xy - C.xy, n);
-  float dDdx = 0.0;
-  if (abs(xk) < p.hw) {
-    float dx = dot(dk.xy, n), dz = dk.z - ra * dot(dk.xy, p.e) - rx * dx;  // per unit along the ray, below the rim plane
-    float xh = xk;
-    if (abs(dx) > 1e-7 * abs(dz)) {
-      // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between knots.
-      float k = dz / dx, step = p.hw / 8.0, dir = sign(dx);
-      float x0 = xk, sl;
-      float f0 = gDepth(p.prof, abs(x0), p.hw, sl);
-      xh = dir * p.hw;
-      for (int m = 0; m < 17; ++m) {
-        // The next knot (or the far edge) in the ray's direction.
-        float x1 = dir > 0.0 ? min(floor(x0 / step + 1e-4) * step + step, p.hw) : max(ceil(x0 / step - 1e-4) * step - step, -p.hw);
-        float f1 = (x1 - xk) * k + gDepth(p.prof, abs(x1), p.hw, sl);
-        if (f1 <= 0.0) {
-          xh = x0 + (x1 - x0) * f0 / max(f0 - f1, 1e-30);
-          break;
-        }
-        if (abs(x1) >= p.hw) break;
-        x0 = x1;
-        f0 = f1;
-      }
-    }
-    float sl = gSmoothSlope(p.prof, abs(xh), p.hw);
-    dDdx = xh < 0.0 ? -sl : sl;
-  }
-  vec2 g = p.e * ra + n * (rx - dDdx);
+  float xk, dDdx;
+  if (gFootprintLand(p, C, ra, rx, o, dk, xk, dDdx) < 0.0) return vec3(-1.0);
+  vec2 g = p.e * ra + vec2(-p.e.y, p.e.x) * (rx - dDdx);
   vec3 nf = normalize(vec3(-g, 1.0));
   vec3 nWorld = c.axisU.xyz * nf.x + c.axisV.xyz * nf.y + c.axisW.xyz * nf.z;
   return shade(albedo, nWorld, world);
 }
 
 // Anti-aliasing of grooves narrower than two pixels (003 eq. 6's footprint area ratios, integrated
-// numerically): of the two pieces nearest the hit's texel (the gap field's candidates: a search
-// of the bins around every pixel cost llvmpipe more than the rays below), the narrow one nearest
-// the hit whose capsule the pixel's footprint reaches; grooveSamples rays spread across it over
-// the pixel (weights: the pixel square's chord lengths across the groove's screen direction),
-// each followed down the groove's profile in its cross-section and shaded where it lands; their
-// weighted mean is the pixel's colour. (Only one groove: where two narrow ones cross inside a
-// pixel, one of them.)
+// numerically): the piece gAAPiece picks (castCell's, where it chose one for this pixel);
+// grooveSamples rays spread across it over the pixel (weights: the pixel square's chord lengths
+// across the groove's screen direction), each followed down the groove's profile in its
+// cross-section and shaded where it lands; their weighted mean is the pixel's colour. (Only one
+// groove: where two narrow ones cross inside a pixel, one of them.)
 vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   uint blk = grooveEntry[cell];
   if (!grooveAA || blk == kNoGrooves) return color;
+  int best = aaPiece != kAAUnknown ? aaPiece : gAAPiece(c, cell, o, d, tS);
   vec3 hit = o + d * tS;
-  float foot = tS * pixelAngle;  // a pixel across the ray at the hit
-  float reach = gFootprintReach(tS, d);
-  uvec2 near = grooveNear(c, cell, hit.xy);
-  int best = -1;
-  float bestGap = 1e30;
-  for (int k = 0; k < 2; ++k) {
-    if (near[k] == kNoGrooves) continue;
-    GPiece p = gPiece(blk, near[k]);
-    float s, x;
-    float gap = gDist(p, hit.xy, s, x) - p.hw;
-    vec2 gr;
-    gRim(p, s, x, gr);
-    vec3 a3 = vec3(-p.e.y, p.e.x, dot(gr, vec2(-p.e.y, p.e.x)));
-    float wpx = 2.0 * p.hw * length(a3 - d * dot(a3, d)) / foot;
-    if (wpx < 2.0 && gap < reach && gap < bestGap) {
-      best = int(near[k]);
-      bestGap = gap;
-    }
-  }
   if (best < 0) return color;
   GPiece p = gPiece(blk, uint(best));
-  float s0, x0;
-  vec2 gr;
-  gDist(p, hit.xy, s0, x0);
-  s0 = clamp(s0, 0.0, p.len);
-  float z0 = gRim(p, s0, 0.0, gr);
-  float ra = dot(gr, p.e), rx = dot(gr, vec2(-p.e.y, p.e.x));
+  vec3 C;
+  float ra, rx;
+  gSection(p, hit.xy, C, ra, rx);
   vec3 R = toFrame(c, camRight), U = toFrame(c, camUp);
   vec3 e3 = vec3(p.e, ra);
   vec2 g2 = vec2(dot(e3, R), dot(e3, U));
@@ -563,7 +624,6 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   vec3 rel = cellRelativeToCamera(c);
   vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
-  vec3 C = vec3(p.a + p.e * s0, z0);
   vec3 sum = vec3(0.0);
   float wsum = 0.0;
   int n = clamp(grooveSamples, 1, 64);

@@ -3,10 +3,11 @@
 // it can differ from the height field:
 //   1. the cells with grooves are drawn by the height field's march (GROOVES_DEFER); a pixel whose
 //      hit lies within reach of a groove (the cell's gap field) is not drawn but deferred: its
-//      cell, its class (0: the carved cast, its hit near a capsule; 1: the march's hit stands and
-//      only the anti-aliasing of a narrow groove's footprint changes its colour) and the march's
-//      hit go to one of DEFER_SLOTS slots of the pixel, its 4x4 tile to the list of that slot and
-//      class;
+//      cell, its class (0: the carved cast, its hit near a capsule; 1: the anti-aliasing of a
+//      narrow groove's footprint draws it - the march's hit near the capsules, or in one where
+//      every groove of the cell is narrower than the pixel, the footprint's centre ray's landing
+//      in the groove's cross-section) and the march's hit go to one of DEFER_SLOTS slots of the
+//      pixel, its 4x4 tile to the list of that slot and class;
 //   2. each list's tiles are drawn by its class's program (PIXEL_RAYS; class 1 GROOVES_HIT_STANDS),
 //      each pixel for the cell its slot holds (none, or of the other class: discarded at once),
 //      along the pixel's own ray, from the march's hit.
@@ -25,8 +26,11 @@ const uint kGapWords = 3u;      // gcast::kGapFieldWords
 uint grooveFieldTexel(Cell c, int cell, vec2 q) {
   ivec2 n = max(ivec2(c.boxW.zw), ivec2(1));
   ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * vec2(n))), ivec2(0), n - 1);
-  return grooveField[cell] + kGapWords * uint(i.y * n.x + i.x);
+  return grooveField[cell] + 1u + kGapWords * uint(i.y * n.x + i.x);
 }
+
+// The most any of the cell's pieces measures across (gcast::widestAcross).
+float grooveWidest(int cell) { return uintBitsToFloat(grooveField[grooveField[cell]]); }
 
 // The two pieces nearest the centre of the texel under q by (distance - half width) (~0u: none).
 uvec2 grooveNear(Cell c, int cell, vec2 q) {

@@ -163,12 +163,15 @@ TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
   for (const gcast::CellPieces& cp : f.model.cells) {
     const CellRecord& c = f.pack.cells()[cp.cell];
     ASSERT_NE(words[cp.cell], gcast::kNoEntry);
+    float wide;
+    std::memcpy(&wide, &words[words[cp.cell]], 4);
+    EXPECT_FLOAT_EQ(wide, float(gcast::widestAcross(cp)));
     const double tu = (c.box[1] - c.box[0]) / c.tileW, tv = (c.box[3] - c.box[2]) / c.tileH, q = gcast::gapQuantum(c);
     std::uniform_real_distribution<double> U(c.box[0], c.box[1]), V(c.box[2], c.box[3]);
     for (int k = 0; k < 20000; ++k) {
       const Eigen::Vector2d p(U(rng), V(rng));
       const int i = std::clamp(int((p.x() - c.box[0]) / tu), 0, c.tileW - 1), j = std::clamp(int((p.y() - c.box[2]) / tv), 0, c.tileH - 1);
-      const size_t texel = words[cp.cell] + gcast::kGapFieldWords * (size_t(j) * c.tileW + i);
+      const size_t texel = words[cp.cell] + 1 + gcast::kGapFieldWords * (size_t(j) * c.tileW + i);
       const uint32_t w = words[texel];
       double lip = 1e300, width = 1e300;
       // The anti-aliasing's candidates: the two pieces of least (distance - half width) at the
@@ -182,6 +185,13 @@ TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
         lip = std::min(lip, d - pc.lip);
         width = std::min(width, d - pc.halfWidth);
         byWidth.emplace_back(gcast::pieceDistance(pc, ctr, s, x) - pc.halfWidth, pi);
+        if (d < 2 * pc.lip) {  // how wide the piece looks across where the anti-aliasing can see it
+          Eigen::Vector2d g;
+          gcast::pieceDistance(pc, p, s, x);
+          gcast::pieceRim(pc, s, x, &g);
+          const double slope = g.dot(Eigen::Vector2d(-pc.e.y(), pc.e.x()));
+          ASSERT_LE(2 * pc.halfWidth * std::sqrt(1 + slope * slope), wide);
+        }
       }
       std::sort(byWidth.begin(), byWidth.end());
       if (byWidth[0].first < 65535 * q) {
