@@ -410,8 +410,9 @@ float gNarrowLanding(Cell c, int cell, vec3 o, vec3 d, float tS) {
   vec3 C;
   float ra, rx, xk, dDdx;
   gSection(p, (o + d * tS).xy, C, ra, rx);
-  float t = gFootprintLand(p, C, ra, rx, o, d, xk, dDdx);
-  if (t < 0.0 || !(abs(xk) < p.lip)) return tS;
+  float t = gFootprintLand(p, C, ra, rx, o, d, xk, dDdx), sl, xl;
+  // Past a rounded end the straight cross-section has no groove: there the march's hit stands.
+  if (t < 0.0 || !(abs(xk) < p.lip) || !(gDist(p, (o + d * t).xy, sl, xl) < p.lip)) return tS;
   castNormal = normalize(vec3(-(p.e * ra + vec2(-p.e.y, p.e.x) * (rx - dDdx)), 1.0));
   castHasNormal = true;
   return t;
