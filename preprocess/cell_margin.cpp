@@ -33,7 +33,7 @@ void MarginFinder::find(const Cell& c, double radius, double minCos, std::vector
   const size_t before = out.size();
   std::vector<std::pair<double, uint32_t>> near;
   for (size_t a = 0; a < q; ++a) {
-    index_->grid.within(&queries[3 * a], radius, near);
+    index_->grid.within(&queries[3 * a], radius, near, false);  // sorted and made unique below
     for (const auto& [d2, j] : near) {
       if (j >= c.first && j < c.first + c.count) continue;
       const Eigen::Vector3d d = Eigen::Vector3d(&pos_[3 * size_t(j)]) - c.origin;

@@ -39,16 +39,46 @@ Zstd& zstd() {
   return z;
 }
 
+// Byte b of record i to planes[b * m + i] (shuffle) and back (unshuffle), 16 records at a time:
+// each plane then gets 16 consecutive bytes instead of one (a byte at a time, the shuffle was
+// 5 % of packing a LAS).
+constexpr size_t kRec = sizeof(ChunkPoint);
+void shuffleRecords(const uint8_t* src, size_t m, uint8_t* planes) {
+  size_t i = 0;
+  for (; i + 16 <= m; i += 16) {
+    uint8_t block[16 * kRec];
+    std::memcpy(block, src + i * kRec, sizeof(block));
+    for (size_t b = 0; b < kRec; ++b) {
+      uint8_t row[16];
+      for (size_t k = 0; k < 16; ++k) row[k] = block[k * kRec + b];
+      std::memcpy(planes + b * m + i, row, 16);
+    }
+  }
+  for (; i < m; ++i)
+    for (size_t b = 0; b < kRec; ++b) planes[b * m + i] = src[i * kRec + b];
+}
+void unshuffleRecords(const uint8_t* planes, size_t m, uint8_t* dst) {
+  size_t i = 0;
+  for (; i + 16 <= m; i += 16) {
+    uint8_t block[16 * kRec];
+    for (size_t b = 0; b < kRec; ++b) {
+      uint8_t row[16];
+      std::memcpy(row, planes + b * m + i, 16);
+      for (size_t k = 0; k < 16; ++k) block[k * kRec + b] = row[k];
+    }
+    std::memcpy(dst + i * kRec, block, sizeof(block));
+  }
+  for (; i < m; ++i)
+    for (size_t b = 0; b < kRec; ++b) dst[i * kRec + b] = planes[b * m + i];
+}
+
 Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts, size_t n) {
   ZSTD_CCtx* cctx = zstd().c;
   thread_local std::vector<uint8_t> planes, packed;
-  constexpr size_t R = sizeof(ChunkPoint);
   for (size_t at = 0; at < n; at += kMaxFrameRecords) {
     const size_t m = std::min<size_t>(kMaxFrameRecords, n - at);
-    planes.resize(m * R);
-    const uint8_t* src = reinterpret_cast<const uint8_t*>(pts + at);
-    for (size_t i = 0; i < m; ++i)
-      for (size_t b = 0; b < R; ++b) planes[b * m + i] = src[i * R + b];
+    planes.resize(m * kRec);
+    shuffleRecords(reinterpret_cast<const uint8_t*>(pts + at), m, planes.data());
     packed.resize(ZSTD_compressBound(planes.size()));
     const size_t c = ZSTD_compressCCtx(cctx, packed.data(), packed.size(), planes.data(), planes.size(), 1);
     if (ZSTD_isError(c)) return Status::internal(path + ": cannot compress a chunk frame: " + ZSTD_getErrorName(c));
@@ -56,7 +86,7 @@ Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts,
     if (std::fwrite(head, 4, 2, f) != 2 || std::fwrite(packed.data(), 1, c, f) != c)
       return Status::internal(path + ": short write (disk full?)");
     gScratchBytes += 8 + c;
-    gScratchRaw += m * R;
+    gScratchRaw += m * kRec;
   }
   return Status::ok();
 }
@@ -66,22 +96,19 @@ Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts,
 Result<bool> readFrame(std::FILE* f, const std::string& path, std::vector<ChunkPoint>& out) {
   ZSTD_DCtx* dctx = zstd().d;
   thread_local std::vector<uint8_t> planes, packed;
-  constexpr size_t R = sizeof(ChunkPoint);
   uint32_t head[2];
   const size_t got = std::fread(head, 4, 2, f);
   if (got == 0 && std::feof(f)) return false;
-  if (got != 2 || head[0] == 0 || head[0] > kMaxFrameRecords || head[1] > ZSTD_compressBound(size_t(head[0]) * R))
+  if (got != 2 || head[0] == 0 || head[0] > kMaxFrameRecords || head[1] > ZSTD_compressBound(size_t(head[0]) * kRec))
     return Status::internal(path + ": chunk file is damaged (a frame header out of range)");
   packed.resize(head[1]);
   if (std::fread(packed.data(), 1, head[1], f) != head[1]) return Status::internal(path + ": chunk file is truncated");
-  planes.resize(size_t(head[0]) * R);
+  planes.resize(size_t(head[0]) * kRec);
   const size_t d = ZSTD_decompressDCtx(dctx, planes.data(), planes.size(), packed.data(), packed.size());
   if (ZSTD_isError(d) || d != planes.size()) return Status::internal(path + ": chunk file is damaged (a frame does not decode)");
   const size_t m = head[0];
   out.resize(m);
-  uint8_t* dst = reinterpret_cast<uint8_t*>(out.data());
-  for (size_t b = 0; b < R; ++b)
-    for (size_t i = 0; i < m; ++i) dst[i * R + b] = planes[b * m + i];
+  unshuffleRecords(planes.data(), m, reinterpret_cast<uint8_t*>(out.data()));
   return true;
 }
 

@@ -276,7 +276,7 @@ void GridKnn::forEach(int k, const Visit& fn) const {
   });
 }
 
-void GridKnn::within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out) const {
+void GridKnn::within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out, bool ordered) const {
   out.clear();
   if (n_ == 0 || !(radius >= 0)) return;
   int64_t a[3], b[3];
@@ -295,7 +295,7 @@ void GridKnn::within(const double* q, double radius, std::vector<std::pair<doubl
       if (d2 <= r2) out.emplace_back(d2, order_[o]);
     }
   });
-  std::sort(out.begin(), out.end());
+  if (ordered) std::sort(out.begin(), out.end());
 }
 
 void GridKnn::query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const {

@@ -34,8 +34,8 @@ class GridKnn {
   void forEach(int k, const Visit& fn) const;
 
   // Every point within `radius` of q (any position, inside the grid or not) as (d2, index),
-  // ascending. Thread-safe.
-  void within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out) const;
+  // ascending (unordered: in the grid's order, for callers that only collect). Thread-safe.
+  void within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out, bool ordered = true) const;
 
   // The same for one point (tests; the slow path).
   void query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const;

@@ -110,8 +110,9 @@ TEST(GridKnn, HugeExtentKeepsTheGridBounded) {
   checkAll(pos, 1e-3, 2);
 }
 
-// Radius queries (the margin finder's and the normal field's): every point within r, ascending,
-// from query positions inside, at the edge of and outside the points' extent.
+// Radius queries (the margin finder's and the normal field's): every point within r, ascending
+// (or in any order when asked), from query positions inside, at the edge of and outside the
+// points' extent.
 TEST(GridKnn, WithinMatchesBruteForce) {
   const auto pos = noisySurface(5000, 0.003, 3);
   const size_t n = pos.size() / 3;
@@ -132,6 +133,9 @@ TEST(GridKnn, WithinMatchesBruteForce) {
       }
       std::sort(want.begin(), want.end());
       ASSERT_EQ(got, want) << "cell " << cell << " query " << t << " radius " << r;
+      g.within(q, r, got, false);  // unordered: the same points
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, want) << "unordered, cell " << cell << " query " << t << " radius " << r;
     }
   }
 }
