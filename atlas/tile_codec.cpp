@@ -28,16 +28,15 @@ inline uint32_t predictAt(const uint32_t* cur, const uint32_t* prev, uint32_t i)
 
 uint32_t readValue(const uint8_t* p, int bytes) { return bytes == 2 ? uint32_t(p[0]) | uint32_t(p[1]) << 8 : p[0]; }
 
-}  // namespace
 
-std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+// The residual byte planes of region r of `page`: component after component, low bytes first
+// (the high bytes of small residuals are runs of 0x00 and 0xff).
+std::vector<uint8_t> residualPlanes(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
   const size_t n = size_t(r.w) * r.h, tb = size_t(layout.texelBytes());
   const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
   std::vector<uint8_t> planes(n * tb);
   std::vector<uint32_t> rows(2 * size_t(r.w));
   for (int c = 0; c < layout.comps; ++c) {
-    // Byte planes, component after component, low bytes first: the high bytes of small
-    // residuals are runs of 0x00 and 0xff.
     uint8_t* lo = planes.data() + size_t(c) * layout.bytes * n;
     uint8_t* hi = lo + n;
     for (uint32_t j = 0; j < r.h; ++j) {
@@ -53,27 +52,16 @@ std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileReg
       }
     }
   }
-  std::vector<uint8_t> out(ZSTD_compressBound(planes.size()));
-  const size_t z = ZSTD_compress(out.data(), out.size(), planes.data(), planes.size(), kZstdLevel);
-  out.resize(ZSTD_isError(z) ? 0 : z);  // cannot fail: the bound holds
-  return out;
+  return planes;
 }
 
-Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+// The inverse: region r of `page` from its residual planes.
+void applyPlanes(const uint8_t* planes, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
   const size_t n = size_t(r.w) * r.h, tb = size_t(layout.texelBytes());
-  const unsigned long long declared = ZSTD_getFrameContentSize(blob.data(), blob.size());
-  if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN)
-    return Status::badInput("not a zstd frame with its size");
-  if (declared != n * tb)
-    return Status::badInput("holds " + std::to_string(declared) + " bytes, the tile needs " + std::to_string(n * tb));
-  std::vector<uint8_t> planes(n * tb);
-  const size_t got = ZSTD_decompress(planes.data(), planes.size(), blob.data(), blob.size());
-  if (ZSTD_isError(got)) return Status::badInput(std::string("damaged (") + ZSTD_getErrorName(got) + ")");
-  if (got != planes.size()) return Status::badInput("decodes to fewer bytes than its frame says");
   const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
   std::vector<uint32_t> rows(2 * size_t(r.w));
   for (int c = 0; c < layout.comps; ++c) {
-    const uint8_t* lo = planes.data() + size_t(c) * layout.bytes * n;
+    const uint8_t* lo = planes + size_t(c) * layout.bytes * n;
     const uint8_t* hi = lo + n;
     for (uint32_t j = 0; j < r.h; ++j) {
       uint32_t* cur = rows.data() + size_t(j & 1) * r.w;
@@ -88,6 +76,283 @@ Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWid
       }
     }
   }
+}
+
+std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, size_t skip = 0) {
+  std::vector<uint8_t> out(skip + ZSTD_compressBound(bytes.size()));
+  const size_t z = ZSTD_compress(out.data() + skip, out.size() - skip, bytes.data(), bytes.size(), kZstdLevel);
+  out.resize(ZSTD_isError(z) ? 0 : skip + z);  // cannot fail: the bound holds
+  return out;
+}
+
+// A pyramid blob: this tag, then one zstd frame (FORMAT.md, "Compressed pages").
+constexpr uint8_t kPyramidTag[4] = {'P', 'Y', 'R', '1'};
+
+// The tile of region r without its gutter, when the gutter repeats the tile's edge (corners
+// included) as every writer's does; empty otherwise.
+std::vector<uint8_t> interiorOf(const uint8_t* page, uint32_t pageWidth, TileRegion r, size_t tb) {
+  const uint32_t iw = r.w - 2, ih = r.h - 2;
+  std::vector<uint8_t> in(size_t(iw) * ih * tb);
+  for (uint32_t j = 0; j < ih; ++j)
+    std::memcpy(in.data() + size_t(j) * iw * tb, page + ((size_t(r.y) + j + 1) * pageWidth + r.x + 1) * tb, iw * tb);
+  for (uint32_t j = 0; j < r.h; ++j)
+    for (uint32_t i = 0; i < r.w; ++i) {
+      if (i && j && i <= iw && j <= ih) continue;
+      const uint32_t ci = std::clamp<uint32_t>(i, 1, iw) - 1, cj = std::clamp<uint32_t>(j, 1, ih) - 1;
+      const uint8_t* p = page + ((size_t(r.y) + j) * pageWidth + r.x + i) * tb;
+      if (std::memcmp(in.data() + (size_t(cj) * iw + ci) * tb, p, tb) != 0) return {};
+    }
+  return in;
+}
+
+// Texel (i, j) of level l of a pyramid over a w-texel-wide tile: tile texel (i 2^l, j 2^l).
+struct Level {
+  uint32_t w, h, step;
+};
+
+std::vector<Level> levelsOf(uint32_t w, uint32_t h) {
+  std::vector<Level> lv{{w, h, 1}};
+  for (int l = pyramidLevels(w, h); l > 0; --l) {
+    const Level& f = lv.back();
+    lv.push_back({(f.w + 1) / 2, (f.h + 1) / 2, f.step * 2});
+  }
+  return lv;
+}
+
+// Level `L` of tile `t` (w wide) as a tight grid, and back.
+void gather(const uint8_t* t, uint32_t w, Level L, size_t tb, uint8_t* g) {
+  for (uint32_t j = 0; j < L.h; ++j)
+    for (uint32_t i = 0; i < L.w; ++i)
+      std::memcpy(g + (size_t(j) * L.w + i) * tb, t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, tb);
+}
+void scatter(const uint8_t* g, Level L, uint32_t w, size_t tb, uint8_t* t) {
+  for (uint32_t j = 0; j < L.h; ++j)
+    for (uint32_t i = 0; i < L.w; ++i)
+      std::memcpy(t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, g + (size_t(j) * L.w + i) * tb, tb);
+}
+
+// Per level, finest first: the grid's values, its coverage and its rebuild from the next level
+// (upsampleEven over the grid).
+struct LevelGrids {
+  std::vector<uint8_t> values, cov, rebuilt;
+};
+
+// The residuals of a level's texels that are not even/even (row-major) against the rebuild,
+// byte planes as residualPlanes'; applyOdd is the inverse.
+void encodeOdd(const LevelGrids& g, Level L, TexelLayout layout, std::vector<uint8_t>& out) {
+  const size_t tb = size_t(layout.texelBytes()), odd = size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2);
+  const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
+  const size_t base = out.size();
+  out.resize(base + odd * tb);
+  for (int c = 0; c < layout.comps; ++c) {
+    uint8_t* lo = out.data() + base + size_t(c) * layout.bytes * odd;
+    uint8_t* hi = lo + odd;
+    size_t o = 0;
+    for (uint32_t j = 0; j < L.h; ++j)
+      for (uint32_t i = 0; i < L.w; ++i) {
+        if (!(i & 1) && !(j & 1)) continue;
+        const size_t at = (size_t(j) * L.w + i) * tb + size_t(c) * layout.bytes;
+        const uint32_t res = (readValue(&g.values[at], layout.bytes) - readValue(&g.rebuilt[at], layout.bytes)) & mask;
+        lo[o] = uint8_t(res);
+        if (layout.bytes == 2) hi[o] = uint8_t(res >> 8);
+        ++o;
+      }
+  }
+}
+void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g) {
+  const size_t tb = size_t(layout.texelBytes()), odd = size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2);
+  const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
+  for (int c = 0; c < layout.comps; ++c) {
+    const uint8_t* lo = planes + size_t(c) * layout.bytes * odd;
+    const uint8_t* hi = lo + odd;
+    size_t o = 0;
+    for (uint32_t j = 0; j < L.h; ++j)
+      for (uint32_t i = 0; i < L.w; ++i) {
+        if (!(i & 1) && !(j & 1)) continue;
+        const size_t at = (size_t(j) * L.w + i) * tb + size_t(c) * layout.bytes;
+        const uint32_t res = layout.bytes == 2 ? uint32_t(lo[o]) | uint32_t(hi[o]) << 8 : lo[o];
+        const uint32_t v = (readValue(&g.rebuilt[at], layout.bytes) + res) & mask;
+        g.values[at] = uint8_t(v);
+        if (layout.bytes == 2) g.values[at + 1] = uint8_t(v >> 8);
+        ++o;
+      }
+  }
+}
+
+size_t oddCount(Level L) { return size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2); }
+
+// The pyramid blob of region r (empty for a tile too small for a level or a gutter that does
+// not repeat the tile): the coverage mask, the coarsest level's residual planes, then each finer
+// level's other texels against their rebuild from the level above.
+std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+  if (r.w < 3 || r.h < 3) return {};
+  const size_t tb = size_t(layout.texelBytes());
+  const std::vector<uint8_t> in = interiorOf(page, pageWidth, r, tb);
+  const uint32_t iw = r.w - 2, ih = r.h - 2;
+  const std::vector<Level> lv = levelsOf(iw, ih);
+  if (in.empty() || lv.size() < 2) return {};
+  const size_t n = size_t(iw) * ih, maskBytes = (n + 7) / 8;
+  std::vector<uint8_t> cov(n), payload(maskBytes, 0);
+  for (size_t k = 0; k < n; ++k) {
+    cov[k] = std::any_of(in.begin() + k * tb, in.begin() + (k + 1) * tb, [](uint8_t b) { return b != 0; });
+    payload[k / 8] |= uint8_t(cov[k] << (k % 8));
+  }
+  const Level& top = lv.back();
+  std::vector<uint8_t> grid(size_t(top.w) * top.h * tb);
+  gather(in.data(), iw, top, tb, grid.data());
+  const std::vector<uint8_t> coarse = residualPlanes(grid.data(), top.w, {0, 0, top.w, top.h}, layout);
+  payload.insert(payload.end(), coarse.begin(), coarse.end());
+  for (size_t l = lv.size() - 1; l-- > 0;) {
+    LevelGrids g;
+    g.values.resize(size_t(lv[l].w) * lv[l].h * tb);
+    g.cov.resize(size_t(lv[l].w) * lv[l].h);
+    g.rebuilt.resize(g.values.size());
+    gather(in.data(), iw, lv[l], tb, g.values.data());
+    gather(cov.data(), iw, lv[l], 1, g.cov.data());
+    upsampleEven(g.values.data(), g.cov.data(), lv[l].w, lv[l].h, layout, g.rebuilt.data());
+    encodeOdd(g, lv[l], layout, payload);
+  }
+  std::vector<uint8_t> out = compress(payload, sizeof kPyramidTag);
+  std::copy(std::begin(kPyramidTag), std::end(kPyramidTag), out.begin());
+  return out;
+}
+
+// Reads one zstd frame of exactly `want` bytes.
+Status decompressExactly(std::span<const uint8_t> blob, size_t want, std::vector<uint8_t>& out) {
+  const unsigned long long declared = ZSTD_getFrameContentSize(blob.data(), blob.size());
+  if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN)
+    return Status::badInput("not a zstd frame with its size");
+  if (declared != want)
+    return Status::badInput("holds " + std::to_string(declared) + " bytes, the tile needs " + std::to_string(want));
+  out.resize(want);
+  const size_t got = ZSTD_decompress(out.data(), out.size(), blob.data(), blob.size());
+  if (ZSTD_isError(got)) return Status::badInput(std::string("damaged (") + ZSTD_getErrorName(got) + ")");
+  if (got != out.size()) return Status::badInput("decodes to fewer bytes than its frame says");
+  return Status::ok();
+}
+
+Status decodePyramid(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+  if (r.w < 3 || r.h < 3) return Status::badInput("a pyramid blob for a tile under one texel");
+  const size_t tb = size_t(layout.texelBytes());
+  const uint32_t iw = r.w - 2, ih = r.h - 2;
+  const std::vector<Level> lv = levelsOf(iw, ih);
+  if (lv.size() < 2) return Status::badInput("a pyramid blob for a tile too small for one");
+  const size_t n = size_t(iw) * ih, maskBytes = (n + 7) / 8;
+  std::vector<uint8_t> payload;
+  SA_RETURN_IF_ERROR(decompressExactly(blob.subspan(sizeof kPyramidTag), maskBytes + n * tb, payload));
+  std::vector<uint8_t> in(n * tb, 0), cov(n);
+  for (size_t k = 0; k < n; ++k) cov[k] = (payload[k / 8] >> (k % 8)) & 1;
+  const Level& top = lv.back();
+  std::vector<uint8_t> grid(size_t(top.w) * top.h * tb);
+  applyPlanes(payload.data() + maskBytes, grid.data(), top.w, {0, 0, top.w, top.h}, layout);
+  scatter(grid.data(), top, iw, tb, in.data());
+  size_t at = maskBytes + grid.size();
+  for (size_t l = lv.size() - 1; l-- > 0;) {
+    LevelGrids g;
+    g.values.resize(size_t(lv[l].w) * lv[l].h * tb);
+    g.cov.resize(size_t(lv[l].w) * lv[l].h);
+    g.rebuilt.resize(g.values.size());
+    gather(in.data(), iw, lv[l], tb, g.values.data());
+    gather(cov.data(), iw, lv[l], 1, g.cov.data());
+    upsampleEven(g.values.data(), g.cov.data(), lv[l].w, lv[l].h, layout, g.rebuilt.data());
+    applyOdd(payload.data() + at, lv[l], layout, g);
+    at += oddCount(lv[l]) * tb;
+    scatter(g.values.data(), lv[l], iw, tb, in.data());
+  }
+  for (uint32_t j = 0; j < r.h; ++j)
+    for (uint32_t i = 0; i < r.w; ++i) {
+      const uint32_t ci = std::clamp<uint32_t>(i, 1, iw) - 1, cj = std::clamp<uint32_t>(j, 1, ih) - 1;
+      std::memcpy(page + ((size_t(r.y) + j) * pageWidth + r.x + i) * tb, in.data() + (size_t(cj) * iw + ci) * tb, tb);
+    }
+  return Status::ok();
+}
+
+}  // namespace
+
+int pyramidLevels(uint32_t w, uint32_t h) {
+  int l = 0;
+  for (; l < kMaxPyramidLevels && w >= 4 && h >= 4; ++l) {
+    w = (w + 1) / 2;
+    h = (h + 1) / 2;
+  }
+  return l;
+}
+
+void upsampleEven(const uint8_t* src, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout, uint8_t* dst) {
+  const size_t tb = size_t(layout.texelBytes());
+  const uint32_t q = std::max(layout.quantum, 1u), top = layout.bytes == 2 ? 0xffffu : 0xffu;
+  for (uint32_t j = 0; j < h; ++j)
+    for (uint32_t i = 0; i < w; ++i) {
+      const size_t k = size_t(j) * w + i;
+      uint8_t* d = dst + k * tb;
+      if (!(i & 1) && !(j & 1)) {
+        std::memcpy(d, src + k * tb, tb);
+        continue;
+      }
+      if (!covered[k]) {
+        std::memset(d, 0, tb);
+        continue;
+      }
+      uint32_t sum[4] = {0, 0, 0, 0}, count = 0;
+      const int oi = int(i & 1), oj = int(j & 1);
+      for (int dj = -oj; dj <= oj; dj += 2)
+        for (int di = -oi; di <= oi; di += 2) {
+          const int64_t x = int64_t(i) + di, y = int64_t(j) + dj;
+          if (x < 0 || y < 0 || x >= int64_t(w) || y >= int64_t(h)) continue;
+          const size_t m = size_t(y) * w + size_t(x);
+          if (!covered[m]) continue;
+          for (int c = 0; c < layout.comps; ++c) sum[c] += readValue(src + m * tb + size_t(c) * layout.bytes, layout.bytes);
+          ++count;
+        }
+      for (int c = 0; c < layout.comps; ++c) {
+        uint32_t v = count ? (2 * sum[c] + count * q) / (2 * count * q) * q : 0;  // the nearest multiple, ties up
+        if (v > top) v -= q;
+        d[size_t(c) * layout.bytes] = uint8_t(v);
+        if (layout.bytes == 2) d[size_t(c) * layout.bytes + 1] = uint8_t(v >> 8);
+      }
+    }
+}
+
+size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout,
+                     const std::function<bool(const uint8_t*, const uint8_t*)>& close) {
+  const size_t tb = size_t(layout.texelBytes());
+  const std::vector<Level> lv = levelsOf(w, h);
+  size_t snapped = 0;
+  for (size_t l = lv.size() - 1; l-- > 0;) {
+    const Level L = lv[l];
+    LevelGrids g;
+    g.values.resize(size_t(L.w) * L.h * tb);
+    g.cov.resize(size_t(L.w) * L.h);
+    g.rebuilt.resize(g.values.size());
+    gather(texels, w, L, tb, g.values.data());
+    gather(covered, w, L, 1, g.cov.data());
+    upsampleEven(g.values.data(), g.cov.data(), L.w, L.h, layout, g.rebuilt.data());
+    for (uint32_t j = 0; j < L.h; ++j)
+      for (uint32_t i = 0; i < L.w; ++i) {
+        const size_t k = size_t(j) * L.w + i;
+        const uint8_t *a = &g.values[k * tb], *b = &g.rebuilt[k * tb];
+        if ((!(i & 1) && !(j & 1)) || !g.cov[k] || std::memcmp(a, b, tb) == 0) continue;
+        if (std::all_of(b, b + tb, [](uint8_t x) { return x == 0; }) || !close(a, b)) continue;
+        std::memcpy(texels + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, b, tb);
+        ++snapped;
+      }
+  }
+  return snapped;
+}
+
+std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+  std::vector<uint8_t> full = compress(residualPlanes(page, pageWidth, r, layout));
+  if (layout.comps == 1) return full;  // heights: LOCO-I alone was as small on the 2 M-point survey
+  std::vector<uint8_t> pyramid = encodePyramid(page, pageWidth, r, layout);
+  return !pyramid.empty() && pyramid.size() < full.size() ? pyramid : full;
+}
+
+Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+  if (blob.size() >= sizeof kPyramidTag && std::equal(std::begin(kPyramidTag), std::end(kPyramidTag), blob.begin()))
+    return decodePyramid(blob, page, pageWidth, r, layout);
+  std::vector<uint8_t> planes;
+  SA_RETURN_IF_ERROR(decompressExactly(blob, size_t(r.w) * r.h * layout.texelBytes(), planes));
+  applyPlanes(planes.data(), page, pageWidth, r, layout);
   return Status::ok();
 }
 

@@ -1,9 +1,14 @@
 // Lossless per-tile coding of the page sections (docs/FORMAT.md, "Compressed pages"): each
 // cell's tile with its gutter is predicted texel by texel from its left, upper and upper-left
 // neighbours (LOCO-I's median predictor, per component), the residuals split into byte planes
-// and compressed by zstd. Tiles are coded alone, so any one decodes without the others.
+// and compressed by zstd. Tiles are coded alone, so any one decodes without the others. Normal
+// and colour tiles may instead be coded as a pyramid, when smaller: the texels at every 2^L-th
+// column and row so, and each finer level's other texels as their difference to the rebuild
+// from the level above (upsampleEven), which is zero wherever the writer snapped a texel to that
+// rebuild (snapToPyramid).
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
@@ -13,19 +18,41 @@
 namespace sa {
 
 // What a page texel holds: `comps` components of `bytes` bytes (1 or 2) each.
+// Rebuilt texels are rounded to multiples of `quantum` (the normals' kNormalStep).
 struct TexelLayout {
   int comps = 1;
   int bytes = 2;
+  uint32_t quantum = 1;
   int texelBytes() const { return comps * bytes; }
 };
-inline constexpr TexelLayout kHeightTexels{1, 2};  // u16 height
-inline constexpr TexelLayout kNormalTexels{2, 2};  // 2 x u16 octahedral normal
-inline constexpr TexelLayout kColorTexels{4, 1};   // RGBA8
+inline constexpr TexelLayout kHeightTexels{1, 2, 1};   // u16 height
+inline constexpr TexelLayout kNormalTexels{2, 2, 64};  // 2 x u16 octahedral normal, multiples of 64
+inline constexpr TexelLayout kColorTexels{4, 1, 1};    // RGBA8
+
+// The levels above the tile a pyramid blob of a w x h tile (without gutter) has: halving while
+// both sides are 4 texels or more, at most kMaxPyramidLevels times.
+inline constexpr int kMaxPyramidLevels = 4;
+int pyramidLevels(uint32_t w, uint32_t h);
+
+// Rebuilds a w x h tile (row-major, tight) from its even texels (even column and even row of
+// `src`; the others are not read): those are copied, every other texel is zero where `covered`
+// (one byte a texel) is 0, else each component the mean of its covered even neighbours (the
+// two beside it along an odd axis, the four diagonal ones at odd/odd; one at an odd last
+// row or column), rounded to a multiple of the quantum; zero when none is covered.
+void upsampleEven(const uint8_t* src, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout, uint8_t* dst);
 
 // A region of a page: x, y, w, h in texels, on a page `pageWidth` texels wide.
 struct TileRegion {
   uint32_t x = 0, y = 0, w = 0, h = 0;
 };
+
+// Sets texels of a w x h tile (row-major, tight, no gutter) to their rebuild from the pyramid
+// level above, coarsest level first, wherever `close(before, after)` accepts the change and the
+// texel is covered with a covered neighbour on that level: the pyramid blob then holds a zero
+// for it. The even/even texels of the coarsest level keep their values. Returns the texels
+// changed.
+size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout,
+                     const std::function<bool(const uint8_t*, const uint8_t*)>& close);
 
 // Codes region r of `page` (row-major, pageWidth texels per row).
 std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout);

@@ -1,0 +1,171 @@
+// The page coder's two forms (atlas/tile_codec.h): LOCO-I planes and the pyramid, lossless
+// whatever the texels, and the snapping that makes the pyramid small without moving a texel
+// past its tolerance.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <random>
+
+#include "atlas/tile_codec.h"
+
+namespace sa {
+namespace {
+
+uint32_t valueAt(const uint8_t* p, int bytes) { return bytes == 2 ? uint32_t(p[0]) | uint32_t(p[1]) << 8 : p[0]; }
+void setValue(uint8_t* p, int bytes, uint32_t v) {
+  p[0] = uint8_t(v);
+  if (bytes == 2) p[1] = uint8_t(v >> 8);
+}
+
+// A w x h tile: a smooth ramp plus noise of `noise` quanta, holes where `holes` says; values
+// multiples of the layout's quantum, 0 in holes.
+std::vector<uint8_t> makeTile(uint32_t w, uint32_t h, TexelLayout L, double noise, double holes, std::mt19937& rng,
+                              std::vector<uint8_t>& cov) {
+  const size_t tb = size_t(L.texelBytes());
+  const uint32_t top = (L.bytes == 2 ? 0xffffu : 0xffu) / L.quantum;
+  std::vector<uint8_t> t(size_t(w) * h * tb, 0);
+  cov.assign(size_t(w) * h, 0);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> g(0, noise);
+  const double a = u(rng), b = u(rng);
+  for (uint32_t j = 0; j < h; ++j)
+    for (uint32_t i = 0; i < w; ++i) {
+      const size_t k = size_t(j) * w + i;
+      if (u(rng) < holes) continue;
+      cov[k] = 1;
+      for (int c = 0; c < L.comps; ++c) {
+        const double v = top * (0.3 + 0.2 * std::sin(a * i * 0.2 + c) + 0.2 * std::cos(b * j * 0.15)) + g(rng);
+        setValue(&t[k * tb + size_t(c) * L.bytes], L.bytes, uint32_t(std::clamp(v, 1.0, double(top))) * L.quantum);
+      }
+    }
+  return t;
+}
+
+// The tile placed in a page at (x, y) with its one-texel gutter repeating the edge.
+std::vector<uint8_t> withGutter(const std::vector<uint8_t>& t, uint32_t w, uint32_t h, size_t tb, uint32_t pageWidth,
+                                uint32_t x, uint32_t y, uint32_t pageHeight) {
+  std::vector<uint8_t> page(size_t(pageWidth) * pageHeight * tb, 0xa5);
+  for (uint32_t j = 0; j < h + 2; ++j)
+    for (uint32_t i = 0; i < w + 2; ++i) {
+      const uint32_t ci = std::clamp<uint32_t>(i, 1, w) - 1, cj = std::clamp<uint32_t>(j, 1, h) - 1;
+      std::memcpy(&page[((size_t(y) + j) * pageWidth + x + i) * tb], &t[(size_t(cj) * w + ci) * tb], tb);
+    }
+  return page;
+}
+
+bool isPyramid(const std::vector<uint8_t>& blob) { return blob.size() > 4 && std::memcmp(blob.data(), "PYR1", 4) == 0; }
+
+TEST(TileCodec, EveryTileDecodesToItsBytesInEitherForm) {
+  std::mt19937 rng(7);
+  int pyramids = 0, tiles = 0;
+  for (TexelLayout L : {kNormalTexels, kColorTexels, kHeightTexels})
+    for (int trial = 0; trial < 60; ++trial) {
+      const uint32_t w = 1 + rng() % 40, h = 1 + rng() % 40, pw = w + 2 + rng() % 5, ph = h + 2 + rng() % 3;
+      const uint32_t x = rng() % (pw - w - 1), y = rng() % (ph - h - 1);
+      const size_t tb = size_t(L.texelBytes());
+      std::vector<uint8_t> cov;
+      std::vector<uint8_t> t = makeTile(w, h, L, trial % 3 == 0 ? 0 : 3.0, trial % 4 == 0 ? 0.3 : 0.02, rng, cov);
+      if (trial % 2) snapToPyramid(t.data(), cov.data(), w, h, L, [](const uint8_t*, const uint8_t*) { return true; });
+      std::vector<uint8_t> page = withGutter(t, w, h, tb, pw, x, y, ph);
+      if (trial % 5 == 4) page[(size_t(y) * pw + x) * tb] ^= 1;  // a gutter that does not repeat: the plain form
+      const TileRegion r{x, y, w + 2, h + 2};
+      const std::vector<uint8_t> blob = encodeTile(page.data(), pw, r, L);
+      pyramids += isPyramid(blob);
+      ++tiles;
+      std::vector<uint8_t> back(page.size(), 0xa5);
+      const Status s = decodeTile(blob, back.data(), pw, r, L);
+      ASSERT_TRUE(s.isOk()) << s.message();
+      ASSERT_EQ(back, page) << "layout " << L.comps << "x" << L.bytes << " tile " << w << "x" << h << " trial " << trial;
+    }
+  std::printf("%d of %d tiles coded as pyramids\n", pyramids, tiles);
+  EXPECT_GT(pyramids, tiles / 5);
+}
+
+// Snapping moves no covered texel past what `close` allows, leaves holes and the coarsest
+// level's even texels alone, and makes the coded tile smaller.
+TEST(TileCodec, SnappingStaysWithinItsToleranceAndShrinksTheTile) {
+  std::mt19937 rng(11);
+  for (TexelLayout L : {kNormalTexels, kColorTexels}) {
+    size_t before = 0, after = 0, snappedAll = 0;
+    for (int trial = 0; trial < 20; ++trial) {
+      const uint32_t w = 8 + rng() % 60, h = 8 + rng() % 60;
+      const size_t tb = size_t(L.texelBytes());
+      std::vector<uint8_t> cov;
+      const std::vector<uint8_t> t = makeTile(w, h, L, 1.0, 0.05, rng, cov);
+      std::vector<uint8_t> s = t;
+      const uint32_t tol = 3 * L.quantum;
+      const size_t snapped = snapToPyramid(s.data(), cov.data(), w, h, L, [&](const uint8_t* a, const uint8_t* b) {
+        for (int c = 0; c < L.comps; ++c)
+          if (std::abs(int(valueAt(a + c * L.bytes, L.bytes)) - int(valueAt(b + c * L.bytes, L.bytes))) > int(tol))
+            return false;
+        return true;
+      });
+      snappedAll += snapped;
+      const int levels = pyramidLevels(w, h);
+      const uint32_t topStep = 1u << levels;
+      for (uint32_t j = 0; j < h; ++j)
+        for (uint32_t i = 0; i < w; ++i) {
+          const size_t k = (size_t(j) * w + i) * tb;
+          if (!cov[size_t(j) * w + i] || (i % topStep == 0 && j % topStep == 0)) {
+            ASSERT_EQ(std::memcmp(&s[k], &t[k], tb), 0) << "a hole or a coarsest texel moved";
+            continue;
+          }
+          for (int c = 0; c < L.comps; ++c) {
+            const int d = int(valueAt(&s[k + c * L.bytes], L.bytes)) - int(valueAt(&t[k + c * L.bytes], L.bytes));
+            ASSERT_LE(std::abs(d), int(tol));
+            ASSERT_EQ(valueAt(&s[k + c * L.bytes], L.bytes) % L.quantum, 0u) << "off the quantum";
+          }
+        }
+      const std::vector<uint8_t> p0 = withGutter(t, w, h, tb, w + 2, 0, 0, h + 2), p1 = withGutter(s, w, h, tb, w + 2, 0, 0, h + 2);
+      before += encodeTile(p0.data(), w + 2, {0, 0, w + 2, h + 2}, L).size();
+      after += encodeTile(p1.data(), w + 2, {0, 0, w + 2, h + 2}, L).size();
+    }
+    std::printf("layout %dx%d: %zu texels snapped, coded %zu -> %zu bytes\n", L.comps, L.bytes, snappedAll, before, after);
+    EXPECT_GT(snappedAll, 0u);
+    EXPECT_LT(double(after), 0.8 * double(before));
+  }
+}
+
+TEST(TileCodec, UpsampleAveragesCoveredEvenNeighboursOnTheQuantum) {
+  // 3 x 3 normals: even texels at the corners and (2, 0)...; the centre averages four.
+  const uint32_t w = 3, h = 3;
+  std::vector<uint8_t> src(w * h * 4, 0), cov(w * h, 1), dst(src.size());
+  auto put = [&](uint32_t i, uint32_t j, uint32_t a, uint32_t b) {
+    setValue(&src[(j * w + i) * 4], 2, a);
+    setValue(&src[(j * w + i) * 4 + 2], 2, b);
+  };
+  put(0, 0, 64 * 10, 64 * 20);
+  put(2, 0, 64 * 12, 64 * 20);
+  put(0, 2, 64 * 10, 64 * 23);
+  put(2, 2, 64 * 13, 64 * 20);
+  cov[1 * w + 0] = 0;  // a hole between (0, 0) and (0, 2)
+  upsampleEven(src.data(), cov.data(), w, h, kNormalTexels, dst.data());
+  auto get = [&](uint32_t i, uint32_t j, int c) { return valueAt(&dst[(j * w + i) * 4 + c * 2], 2); };
+  EXPECT_EQ(get(1, 0, 0), 64u * 11);                // (10 + 12) / 2
+  EXPECT_EQ(get(1, 1, 0), 64u * 11);                // (10 + 12 + 10 + 13) / 4 = 11.25
+  EXPECT_EQ(get(1, 1, 1), 64u * 21);                // (20 + 20 + 23 + 20) / 4 = 20.75
+  EXPECT_EQ(get(0, 1, 0), 0u);                      // the hole stays empty
+  EXPECT_EQ(get(2, 1, 1), 64u * 20);                // (20 + 20) / 2
+  EXPECT_EQ(std::memcmp(&dst[0], &src[0], 4), 0);   // even texels copied
+}
+
+TEST(TileCodec, DamagedPyramidBlobsAreErrors) {
+  std::mt19937 rng(3);
+  const uint32_t w = 20, h = 17;
+  std::vector<uint8_t> cov;
+  std::vector<uint8_t> t = makeTile(w, h, kNormalTexels, 1.0, 0.0, rng, cov);
+  snapToPyramid(t.data(), cov.data(), w, h, kNormalTexels, [](const uint8_t*, const uint8_t*) { return true; });
+  const std::vector<uint8_t> page = withGutter(t, w, h, 4, w + 2, 0, 0, h + 2);
+  const TileRegion r{0, 0, w + 2, h + 2};
+  std::vector<uint8_t> blob = encodeTile(page.data(), w + 2, r, kNormalTexels);
+  ASSERT_TRUE(isPyramid(blob));
+  std::vector<uint8_t> out(page.size());
+  EXPECT_FALSE(decodeTile(std::span(blob).first(blob.size() - 3), out.data(), w + 2, r, kNormalTexels).isOk());
+  EXPECT_FALSE(decodeTile(blob, out.data(), w + 3, {0, 0, w + 3, h + 2}, kNormalTexels).isOk()) << "another tile size";
+  EXPECT_FALSE(decodeTile(std::span(blob).first(4), out.data(), w + 2, r, kNormalTexels).isOk()) << "the tag alone";
+  const Status s = decodeTile(blob, out.data(), 3, {0, 0, 3, 3}, kNormalTexels);
+  EXPECT_FALSE(s.isOk());
+}
+
+}  // namespace
+}  // namespace sa
