@@ -37,6 +37,39 @@ TexelNote texelNote(const std::string& note) {
   return t;
 }
 
+// The NOTE line "precision: height-step T normal-tolerance D colour-tolerance L" (packs made
+// before it have none: they kept every bit but the normals' low 6).
+struct PrecisionNote {
+  bool present = false;
+  double step = 0, degrees = 0;
+  int levels = 0;
+};
+PrecisionNote precisionNote(const std::string& note) {
+  PrecisionNote p;
+  std::istringstream in(note);
+  std::string line;
+  while (std::getline(in, line))
+    if (std::sscanf(line.c_str(), "precision: height-step %lf normal-tolerance %lf colour-tolerance %d", &p.step,
+                    &p.degrees, &p.levels) == 3)
+      p.present = true;
+  return p;
+}
+
+std::string fmtNumber(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+std::string precisionText(const PrecisionNote& p) {
+  if (!p.present) return "not recorded (packed before the precision options: everything as computed)";
+  if (p.step == 0 && p.degrees == 0 && p.levels == 0) return "lossless: heights, normals and colours as computed";
+  return std::string("heights ") + (p.step > 0 ? "in steps of at most " + fmtNumber(p.step) + " texel" : "as computed") +
+         ", normals " + (p.degrees > 0 ? "within " + fmtNumber(p.degrees) + " degree of the coder's prediction" : "as computed") +
+         ", colours " + (p.levels > 0 ? "within " + std::to_string(p.levels) + " levels" : "as computed") +
+         " (pack --lossless keeps all)";
+}
+
 // The page sections' stored bytes against their raw size (FORMAT.md, "Compressed pages").
 struct PageBytes {
   const char* name;
@@ -242,6 +275,12 @@ void printPackJson(const PackReader& pack, const PackSummary& sum) {
   std::string capJson = "null";
   if (!sum.tn.cap.empty()) capJson = '"' + jsonEscape(sum.tn.cap) + '"';
   std::printf(", \"texel_capped_by\": %s", capJson.c_str());
+  const PrecisionNote pn = precisionNote(pack.note());
+  if (pn.present)
+    std::printf(", \"precision\": {\"height_step\": %.9g, \"normal_tolerance\": %.9g, \"colour_tolerance\": %d}", pn.step,
+                pn.degrees, pn.levels);
+  else
+    std::printf(", \"precision\": null");
   std::printf(", \"pages_compressed\": %s, \"page_bytes\": {", pack.compressedPages() ? "true" : "false");
   first = true;
   for (const PageBytes& b : pageBytes(pack)) {
@@ -296,6 +335,7 @@ void printPackText(const PackReader& pack, const PackSummary& sum) {
   else if (sum.tn.present)
     std::printf("detail    full: the texels are the data's (median %.4g: half each cell's area spacing, or --texel-size)\n",
                 sum.tn.wanted);
+  std::printf("precision %s\n", precisionText(precisionNote(pack.note())).c_str());
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
   std::printf("pages    ");
   uint64_t stored = 0, raw = 0;

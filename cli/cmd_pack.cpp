@@ -84,6 +84,16 @@ const char* kHelp =
     "                         scanatlas bake OUT.hfa --mode vdm --clip-box ... | --budget SIZE\n"
     "  --raw-pages            store the atlas pages uncompressed (larger; mapped in place, no decoding\n"
     "                         when opened). Default: each tile coded losslessly (prediction + zstd)\n"
+    "                         after the precision below is applied\n"
+    "  --height-step T        heights rounded to steps of at most T texels; a height moves by half\n"
+    "                         a step at most (default 1/16 for points, whose heights are averages\n"
+    "                         of noisy samples; 0, all 16 bits of the code kept, for meshes)\n"
+    "  --normal-tolerance DEG a stored normal may move by up to DEG degrees to what the coarser\n"
+    "                         texels around it predict, which the page coder then stores as\n"
+    "                         nothing (default 1 for points; 0, every normal kept, for meshes)\n"
+    "  --colour-tolerance L   the same for colours, in grey levels per channel (default 4; 0 keeps)\n"
+    "  --lossless             --height-step 0 --normal-tolerance 0 --colour-tolerance 0: the pages\n"
+    "                         hold the heights, normals and colours as computed (larger)\n"
     "  --reproducible         no timings in the pack: the same input and options give the same bytes\n"
     "                         (timings stay in the summary)\n"
     "  --json                 print the summary as JSON on stdout\n"
@@ -116,6 +126,35 @@ const char* upSourceName(uint32_t s) {
 }
 
 }  // namespace
+
+// --height-step, --normal-tolerance, --colour-tolerance and --lossless.
+static Status parsePrecision(const Args& a, PackOptions& opt) {
+  const bool lossless = a.flag("lossless");
+  for (const char* name : {"height-step", "normal-tolerance", "colour-tolerance"})
+    if (lossless && a.has(name)) return Status::badInput(std::string("--lossless and --") + name + " do not go together");
+  if (lossless) {
+    opt.heightStep = opt.normalTolerance = 0;
+    opt.colourTolerance = 0;
+  }
+  if (a.has("height-step")) {
+    auto v = parseNumber("height-step", a.get("height-step"));
+    if (!v) return v.status();
+    if (*v < 0 || *v > 1) return Status::badInput("--height-step must be in [0, 1] (texels)");
+    opt.heightStep = *v;
+  }
+  if (a.has("normal-tolerance")) {
+    auto v = parseNumber("normal-tolerance", a.get("normal-tolerance"));
+    if (!v) return v.status();
+    if (*v < 0 || *v > 10) return Status::badInput("--normal-tolerance must be in [0, 10] (degrees)");
+    opt.normalTolerance = *v;
+  }
+  if (a.has("colour-tolerance")) {
+    auto v = parseInt("colour-tolerance", a.get("colour-tolerance"), 0, 64);
+    if (!v) return v.status();
+    opt.colourTolerance = static_cast<int>(*v);
+  }
+  return Status::ok();
+}
 
 // The options that shape the pack (not the output or the modes).
 static Status parsePackOptions(const Args& a, PackOptions& opt) {
@@ -194,6 +233,7 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
   opt.force = a.flag("force");
   opt.reproducible = a.flag("reproducible");
   opt.compressPages = !a.flag("raw-pages");
+  SA_RETURN_IF_ERROR(parsePrecision(a, opt));
   opt.scratchParent = a.get("scratch");
   return Status::ok();
 }
@@ -260,8 +300,9 @@ int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
-                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves"},
-                     {"as-points", "strict", "force", "no-smooth", "reproducible", "raw-pages", "json", "quiet", "help"},
+                      "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves",
+                      "height-step", "normal-tolerance", "colour-tolerance"},
+                     {"as-points", "strict", "force", "no-smooth", "reproducible", "raw-pages", "lossless", "json", "quiet", "help"},
                      {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
     std::fputs(kHelp, stdout);

@@ -735,6 +735,18 @@ PackMeta makeMeta(const PackJob& job) {
   return meta;
 }
 
+}  // namespace
+
+Precision effectivePrecision(const PackOptions& o, bool triangles) {
+  Precision p;
+  p.heightStep = o.heightStep >= 0 ? o.heightStep : triangles ? kMeshHeightStep : kPointHeightStep;
+  p.normalTolerance = o.normalTolerance >= 0 ? o.normalTolerance : triangles ? kMeshNormalTolerance : kPointNormalTolerance;
+  p.colourTolerance = std::max(0, o.colourTolerance);
+  return p;
+}
+
+namespace {
+
 // NOTE (FORMAT.md): one "source: <path>" line per input, then the command line.
 std::string makeNote(const PackJob& job) {
   std::string note;
@@ -749,6 +761,11 @@ std::string makeNote(const PackJob& job) {
   std::snprintf(texel, sizeof texel, "texel: %.9g wanted %.9g%s%s\n", job.texel, job.texelWanted,
                 job.texelCap.empty() ? "" : " capped by ", job.texelCap.c_str());
   note += texel;
+  char precision[160];
+  const Precision p = effectivePrecision(job.opt, job.triangles);
+  std::snprintf(precision, sizeof precision, "precision: height-step %.9g normal-tolerance %.9g colour-tolerance %d\n",
+                p.heightStep, p.normalTolerance, p.colourTolerance);
+  note += precision;
   return note;
 }
 
@@ -931,6 +948,14 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::
   dropSteepMargin(c, g, tile);
 }
 
+// The precision the options keep (PackOptions::heightStep and the tolerances): what the page
+// coder then stores in fewer bytes.
+void reducePrecision(const Precision& p, const TileGrid& g, TileOutput& tile) {
+  if (p.heightStep > 0) roundHeights(tile, p.heightStep * std::min(g.du, g.dv));
+  if (p.normalTolerance > 0) snapNormals(tile, g.width, g.height, p.normalTolerance);
+  if (p.colourTolerance > 0) snapColours(tile, g.width, g.height, p.colourTolerance);
+}
+
 // ---- pass B, one chunk: every cell's tile ----
 Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer, ChunkTicker& ticker) {
   std::vector<ChunkPoint> pts;
@@ -945,6 +970,7 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
   const MarginFinder margins(pos.data(), nrm.data(), job.triangles ? 0 : pts.size());
   Status failed;
   std::mutex failMu;
+  const Precision precision = effectivePrecision(job.opt, job.triangles);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
     TileOutput tile;
     for (size_t m = rr.begin(); m < rr.end(); ++m) {
@@ -970,6 +996,7 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
       } else {
         pointTile(job, job.cells[id], r, pts, pos, margins, withColor, writer, id, g, tile);
       }
+      reducePrecision(precision, g, tile);
       Status s = writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
                                   withColor ? tile.rgba.data() : nullptr);
       ticker.add(job.cells[id].count);
@@ -1060,13 +1087,13 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 8;  // 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 9;  // 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
-      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d",
+      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
       o.texelPerSpacing, o.coverageRadius, o.splatRadius, o.outlierRatio, int(o.smooth), int(o.asPoints), o.up.x(),
       o.up.y(), o.up.z(), o.octree.maxDepth, o.octree.minSplitPoints, o.octree.maxAngleDeg, o.octree.outlierFraction,
-      o.normalNeighbours, o.maxPageSize, int(o.compressPages));
+      o.normalNeighbours, o.maxPageSize, int(o.compressPages), o.heightStep, o.normalTolerance, o.colourTolerance);
   XXH3_64bits_update(st, opts, size_t(n));
   for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);

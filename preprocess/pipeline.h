@@ -13,6 +13,15 @@
 
 namespace sa {
 
+// The default precision: a point cloud's heights and normals are averages of noisy samples,
+// whose noise is far above 1/32 texel and about a degree from texel to texel; a mesh's are
+// exact, and kept: the accuracy tests hold its heights to 1e-5 of the model's size (1/16 texel
+// steps: Igea 1.34e-5), a degree of normal snapping shows along its cells' borders (Igea's seam
+// ratio 2.65 -> 2.79), and where a mesh has no normals its shading is the height gradient's
+// (even 1/256 texel steps: the bust's close-up seam ratio 1.72 -> 1.79, bar 1.8).
+inline constexpr double kPointHeightStep = 1.0 / 16, kMeshHeightStep = 0;
+inline constexpr double kPointNormalTolerance = 1, kMeshNormalTolerance = 0;
+
 struct PackOptions {
   uint64_t memBudget = uint64_t(1) << 30;     // bytes
   uint64_t texelBudget = 0;       // at most this many texels over all tiles (0: kMaxTexelsPerPoint per point)
@@ -27,6 +36,13 @@ struct PackOptions {
   bool force = false;             // repack even when the output is up to date
   bool reproducible = false;      // no timings in META: the same input and options give the same bytes
   bool compressPages = true;      // pages coded losslessly per tile (HGTZ, NRMZ, COLZ) instead of raw
+  // What the pages keep (FORMAT.md, "Precision"): heights rounded to steps of at most this many
+  // texels (0: every bit of the 16-bit code); normals and colours set to the page coder's
+  // pyramid rebuild where that moves them by at most these degrees and grey levels (0: kept).
+  // Negative: the defaults above for points or meshes (effectivePrecision).
+  double heightStep = -1;
+  double normalTolerance = -1;
+  int colourTolerance = 4;
   Eigen::Vector3d up = Eigen::Vector3d::Zero();  // zero: from the format's convention or the data
   OctreeParams octree;
   int normalNeighbours = 24;
@@ -34,6 +50,13 @@ struct PackOptions {
   std::string scratchParent;      // where chunk files go (default: beside the output)
   std::string commandLine;        // recorded in the NOTE section
 };
+
+// The precision a pack keeps: the options, with the defaults of a point or a mesh input.
+struct Precision {
+  double heightStep = 0, normalTolerance = 0;
+  int colourTolerance = 0;
+};
+Precision effectivePrecision(const PackOptions& o, bool triangles);
 
 struct PackSummary {
   uint64_t pointsRead = 0, pointsSkipped = 0, triangles = 0, outliersRemoved = 0, surfaceSamples = 0;

@@ -3,8 +3,10 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "atlas/pack_format.h"
+#include "atlas/tile_codec.h"
 #include "preprocess/raster.h"
 
 namespace sa {
@@ -321,6 +323,53 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
       encodeNormal(w[0], w[1], w[2], &out.normals[kNormalBytes * t]);
     }
   }
+}
+
+uint32_t roundHeights(TileOutput& out, double maxStep) {
+  const double range = out.wMax - out.wMin;
+  if (!(range > 0) || !(maxStep > 0)) return 1;
+  const double codes = maxStep / range * 65534.0;  // codes a step of maxStep spans
+  uint32_t m = 1;
+  while (m < 32768 && 2.0 * m <= codes) m *= 2;
+  if (m == 1) return 1;
+  const uint32_t top = 65534 / m * m;  // the largest multiple inside the range
+  for (uint16_t& k : out.heights) {
+    if (!k) continue;
+    const uint32_t q = std::min((uint32_t(k) - 1 + m / 2) / m * m, top);
+    k = static_cast<uint16_t>(q + 1);
+  }
+  return m;
+}
+
+namespace {
+
+// snapToPyramid over the tile's covered texels.
+size_t snap(std::vector<uint8_t>& texels, const std::vector<uint16_t>& heights, int W, int H, TexelLayout layout,
+            const std::function<bool(const uint8_t*, const uint8_t*)>& close) {
+  if (texels.empty()) return 0;
+  std::vector<uint8_t> cov(heights.size());
+  for (size_t k = 0; k < heights.size(); ++k) cov[k] = heights[k] != 0;
+  return snapToPyramid(texels.data(), cov.data(), uint32_t(W), uint32_t(H), layout, close);
+}
+
+}  // namespace
+
+size_t snapNormals(TileOutput& out, int width, int height, double maxDegrees) {
+  const double minCos = std::cos(maxDegrees * M_PI / 180);
+  return snap(out.normals, out.heights, width, height, kNormalTexels, [&](const uint8_t* a, const uint8_t* b) {
+    double na[3], nb[3];
+    decodeNormal(a, na);
+    decodeNormal(b, nb);
+    return na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2] >= minCos;
+  });
+}
+
+size_t snapColours(TileOutput& out, int width, int height, int maxLevels) {
+  return snap(out.rgba, out.heights, width, height, kColorTexels, [&](const uint8_t* a, const uint8_t* b) {
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(int(a[c]) - int(b[c])) > maxLevels) return false;
+    return true;
+  });
 }
 
 void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, double minCos,

@@ -60,6 +60,21 @@ struct SplatOptions {
 
 void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& opt, TileOutput& out);
 
+// Rounds the covered heights' codes to multiples of the largest power of two whose world step is
+// at most maxStep (FORMAT.md): a height moves by at most maxStep / 2 (maxStep at the range's top,
+// rounded down to stay inside it). The bits below hold nothing a render resolves, and with them
+// zero the coded pages' prediction residuals are multiples of the step too. Returns the step in
+// codes (1: nothing changed).
+uint32_t roundHeights(TileOutput& out, double maxStep);
+
+// Sets each covered normal of the tile to its rebuild from the coarser levels of the page
+// coder's pyramid (snapToPyramid) where that moves it by at most maxDegrees; likewise each
+// colour where no channel moves by more than maxLevels. The coder then stores such a texel as
+// a zero difference. The normals are a smooth field over several sample spacings,
+// the texels a fraction of one. Return the texels changed.
+size_t snapNormals(TileOutput& out, int width, int height, double maxDegrees);
+size_t snapColours(TileOutput& out, int width, int height, int maxLevels);
+
 // Triangles in frame coordinates (9 doubles each: u, v, w per vertex). Triangles facing +W
 // (counter-clockwise seen from +W) with a face normal whose W component is over minCos are
 // rasterized, keeping the largest w per texel (the surface seen from the +W side) within

@@ -686,6 +686,37 @@ namespace {
 
 // A texel cap that coarsens the data's resolution is said at pack time and by info afterwards
 // (text and JSON), naming the cap; without a cap info says the detail is full.
+// The precision options: recorded in the pack, reported by info (text and JSON); --lossless
+// keeps more bytes; contradictory or out-of-range options are errors that write nothing.
+TEST(Cli, PrecisionOptionsAreRecordedAndReported) {
+  test::TempDir d;
+  const std::string scans = test::sharedData("stanford_bunny/scans/bun.conf");
+  ASSERT_EQ(run("pack " + scans + " -o " + d.file("d.hfa") + " -q").code, 0);
+  ASSERT_EQ(run("pack " + scans + " -o " + d.file("l.hfa") + " -q --lossless").code, 0);
+  ASSERT_EQ(run("pack " + scans + " -o " + d.file("c.hfa") + " -q --height-step 0.25 --normal-tolerance 0").code, 0);
+  EXPECT_NE(run("info " + d.file("d.hfa")).out.find("precision heights in steps of at most 0.0625 texel, normals within 1 degree"),
+            std::string::npos) << run("info " + d.file("d.hfa")).out;
+  EXPECT_NE(run("info " + d.file("l.hfa")).out.find("precision lossless"), std::string::npos);
+  auto dj = nlohmann::json::parse(run("info " + d.file("d.hfa") + " --json").out);
+  auto lj = nlohmann::json::parse(run("info " + d.file("l.hfa") + " --json").out);
+  auto cj = nlohmann::json::parse(run("info " + d.file("c.hfa") + " --json").out);
+  EXPECT_DOUBLE_EQ(dj["precision"]["height_step"].get<double>(), 0.0625);
+  EXPECT_DOUBLE_EQ(lj["precision"]["normal_tolerance"].get<double>(), 0);
+  EXPECT_DOUBLE_EQ(cj["precision"]["height_step"].get<double>(), 0.25);
+  EXPECT_DOUBLE_EQ(cj["precision"]["normal_tolerance"].get<double>(), 0);
+  const double bd = dj["bytes_per_point"].get<double>(), bl = lj["bytes_per_point"].get<double>();
+  std::printf("bunny scans: %.2f bytes a point by default, %.2f lossless\n", bd, bl);
+  EXPECT_LT(bd, 0.8 * bl);
+  for (const std::string bad : {"--lossless --normal-tolerance 1", "--height-step 2", "--normal-tolerance -1",
+                                "--colour-tolerance 300"}) {
+    CmdResult r = runErr("pack " + scans + " -o " + d.file("bad.hfa") + " " + bad, d.file("err.txt"));
+    EXPECT_EQ(r.code, 2) << bad;
+    EXPECT_NE(r.err.find(bad.substr(bad.rfind("--"), bad.find(' ', bad.rfind("--")) - bad.rfind("--"))), std::string::npos)
+        << bad << ": " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(d.file("bad.hfa"))) << bad;
+  }
+}
+
 TEST(Cli, InfoSaysWhenATexelCapLoweredTheResolution) {
   test::TempDir d;
   const std::string bunny = test::sharedData("stanford_bunny/reconstruction/bun_zipper.ply");

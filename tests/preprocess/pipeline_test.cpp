@@ -7,6 +7,7 @@
 #include <random>
 #include <Eigen/Geometry>
 
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -263,6 +264,63 @@ namespace {
 // convention), with its colours, into a pack that verifies. Its estimated normals all face up,
 // so the normal test alone kept the whole tile one height field (a canopy interpolated down to
 // the ground); the layer test splits it: cells at clearly different heights over the same spot.
+// The precision options (PackOptions::heightStep, normalTolerance, colourTolerance) on a real
+// survey with colour and estimated normals: the same cells and coverage as a lossless pack,
+// every height within its step, every normal within the tolerance (plus the 10-bit
+// quantization's 0.06 degree), every colour within its levels; and fewer bytes.
+TEST(PipelineReal, PrecisionOptionsBoundEveryTexelAndShrinkThePack) {
+  auto in = InputSet::open({test::sharedData("lidar/autzen_trim.las")});
+  ASSERT_TRUE(in.isOk()) << in.status().message();
+  test::TempDir d;
+  PackOptions lossless;
+  lossless.heightStep = lossless.normalTolerance = 0;
+  lossless.colourTolerance = 0;
+  const PackOptions byDefault;
+  PackSummary a, b;
+  ASSERT_TRUE(packInput(*in, d.file("l.hfa"), lossless, nullptr, a).isOk());
+  ASSERT_TRUE(packInput(*in, d.file("d.hfa"), byDefault, nullptr, b).isOk());
+  std::printf("autzen: lossless %llu bytes, default %llu (%.2fx)\n", (unsigned long long)a.fileBytes,
+              (unsigned long long)b.fileBytes, double(a.fileBytes) / double(b.fileBytes));
+  EXPECT_GT(double(a.fileBytes), 1.3 * double(b.fileBytes));
+  PackReader L, D;
+  ASSERT_TRUE(L.open(d.file("l.hfa")).isOk());
+  ASSERT_TRUE(D.open(d.file("d.hfa")).isOk());
+  ASSERT_EQ(L.cells().size(), D.cells().size());
+  ASSERT_TRUE(L.hasColor() && D.normalPage(0));
+  const double cosTol = std::cos((kPointNormalTolerance + 0.07) * M_PI / 180);
+  size_t texels = 0, moved[3] = {0, 0, 0};
+  double worstHeight = 0;  // in texels
+  for (size_t ci = 0; ci < L.cells().size(); ++ci) {
+    const CellRecord &cl = L.cells()[ci], &cd = D.cells()[ci];
+    ASSERT_EQ(cl.tileW, cd.tileW);
+    ASSERT_EQ(cl.tileH, cd.tileH);
+    const double texel = std::min((cl.box[1] - cl.box[0]) / cl.tileW, (cl.box[3] - cl.box[2]) / cl.tileH);
+    for (int j = 0; j < cl.tileH; ++j)
+      for (int i = 0; i < cl.tileW; ++i) {
+        const uint16_t hl = L.texel(cl, i, j), hd = D.texel(cd, i, j);
+        ASSERT_EQ(hl == 0, hd == 0) << "coverage changed in cell " << ci;
+        if (!hl) continue;
+        ++texels;
+        const double dh = std::abs(decodeHeight(hl, cl.box[4], cl.box[5]) - decodeHeight(hd, cd.box[4], cd.box[5])) / texel;
+        worstHeight = std::max(worstHeight, dh);
+        ASSERT_LE(dh, kPointHeightStep + 1e-9) << "cell " << ci;
+        double nl[3], nd[3];
+        decodeNormal(L.normalTexel(cl, i, j), nl);
+        decodeNormal(D.normalTexel(cd, i, j), nd);
+        ASSERT_GE(nl[0] * nd[0] + nl[1] * nd[1] + nl[2] * nd[2], cosTol) << "cell " << ci;
+        const uint8_t* kl = L.colorPage(cl.page) + 4 * ((size_t(cl.tileY) + j) * L.meta().pageWidth + cl.tileX + i);
+        const uint8_t* kd = D.colorPage(cd.page) + 4 * ((size_t(cd.tileY) + j) * D.meta().pageWidth + cd.tileX + i);
+        for (int c = 0; c < 3; ++c) ASSERT_LE(std::abs(int(kl[c]) - int(kd[c])), byDefault.colourTolerance);
+        moved[0] += hl != hd;
+        moved[1] += std::memcmp(L.normalTexel(cl, i, j), D.normalTexel(cd, i, j), kNormalBytes) != 0;
+        moved[2] += std::memcmp(kl, kd, 3) != 0;
+      }
+  }
+  std::printf("%zu texels: heights moved %zu (worst %.4f texel), normals %zu, colours %zu\n", texels, moved[0],
+              worstHeight, moved[1], moved[2]);
+  EXPECT_GT(moved[1], texels / 10) << "the normals' tolerance does something";
+}
+
 TEST(PipelineReal, AutzenLasPacksAsTerrainWithColourAndLayers) {
   auto in = InputSet::open({test::sharedData("lidar/autzen_trim.las")});
   ASSERT_TRUE(in.isOk()) << in.status().message();

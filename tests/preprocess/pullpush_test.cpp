@@ -164,6 +164,40 @@ TEST(PullPush, ColoursFollowSamples) {
 // The triangle path: a rasterized plane is exact at every covered texel centre (inside the
 // triangle, and continued over the texels it touches within half a texel diagonal, so coverage
 // has no sub-texel gaps at the edges of the triangles a cell holds); texels farther out stay empty.
+// Heights rounded for the page coder (PackOptions::heightStep): codes on a power-of-two step
+// whose world size is at most the asked one, every height within half of it (a whole step at
+// the range's top, rounded down to stay inside), holes still holes, covered texels covered.
+TEST(PullPush, RoundedHeightsStayWithinHalfTheirStep) {
+  std::mt19937 rng(5);
+  for (double range : {0.001, 0.2, 7.0, 300.0}) {
+    TileOutput t;
+    t.wMin = -range / 3;
+    t.wMax = t.wMin + range;
+    t.heights.resize(4096);
+    for (size_t k = 0; k < t.heights.size(); ++k) t.heights[k] = k % 17 == 0 ? 0 : uint16_t(1 + rng() % 65535);
+    t.heights[1] = 65535;  // the top code
+    t.heights[2] = 1;      // the bottom
+    const std::vector<uint16_t> before = t.heights;
+    const double maxStep = 0.01;
+    const uint32_t m = roundHeights(t, maxStep);
+    const double codeSize = range / 65534;
+    EXPECT_LE(m * codeSize, maxStep * (1 + 1e-12));
+    if (m > 1 && m < 32768) EXPECT_GT(2 * m * codeSize, maxStep) << "the largest such step";
+    for (size_t k = 0; k < t.heights.size(); ++k) {
+      ASSERT_EQ(before[k] == 0, t.heights[k] == 0);
+      if (!before[k]) continue;
+      ASSERT_EQ((t.heights[k] - 1) % m, 0u);
+      const double moved = std::abs(decodeHeight(t.heights[k], t.wMin, t.wMax) - decodeHeight(before[k], t.wMin, t.wMax));
+      ASSERT_LE(moved, (before[k] > 65534 - m ? 1.0 : 0.5) * m * codeSize * (1 + 1e-9)) << "range " << range;
+    }
+  }
+  TileOutput flat;
+  flat.wMin = flat.wMax = 1;
+  flat.heights = {0, 5, 9};
+  EXPECT_EQ(roundHeights(flat, 0.1), 1u) << "an empty range keeps its codes";
+  EXPECT_EQ(flat.heights[1], 5);
+}
+
 TEST(Raster, TriangleHeightsAreExact) {
   const TileGrid g = unitGrid(64);
   auto plane = [](double u, double v) { return 0.03 * u - 0.02 * v + 0.01; };
