@@ -137,6 +137,19 @@ struct LevelGrids {
   std::vector<uint8_t> values, cov, rebuilt;
 };
 
+// Level L of a w-wide tile and its coverage, and the level's rebuild from the one above.
+LevelGrids levelOf(const uint8_t* tile, const uint8_t* cov, uint32_t w, Level L, TexelLayout layout) {
+  const size_t tb = size_t(layout.texelBytes());
+  LevelGrids g;
+  g.values.resize(size_t(L.w) * L.h * tb);
+  g.cov.resize(size_t(L.w) * L.h);
+  g.rebuilt.resize(g.values.size());
+  gather(tile, w, L, tb, g.values.data());
+  gather(cov, w, L, 1, g.cov.data());
+  upsampleEven(g.values.data(), g.cov.data(), L.w, L.h, layout, g.rebuilt.data());
+  return g;
+}
+
 // The residuals of a level's texels that are not even/even (row-major) against the rebuild,
 // byte planes as residualPlanes'; applyOdd is the inverse.
 void encodeOdd(const LevelGrids& g, Level L, TexelLayout layout, std::vector<uint8_t>& out) {
@@ -203,13 +216,7 @@ std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, Tile
   const std::vector<uint8_t> coarse = residualPlanes(grid.data(), top.w, {0, 0, top.w, top.h}, layout);
   payload.insert(payload.end(), coarse.begin(), coarse.end());
   for (size_t l = lv.size() - 1; l-- > 0;) {
-    LevelGrids g;
-    g.values.resize(size_t(lv[l].w) * lv[l].h * tb);
-    g.cov.resize(size_t(lv[l].w) * lv[l].h);
-    g.rebuilt.resize(g.values.size());
-    gather(in.data(), iw, lv[l], tb, g.values.data());
-    gather(cov.data(), iw, lv[l], 1, g.cov.data());
-    upsampleEven(g.values.data(), g.cov.data(), lv[l].w, lv[l].h, layout, g.rebuilt.data());
+    LevelGrids g = levelOf(in.data(), cov.data(), iw, lv[l], layout);
     encodeOdd(g, lv[l], layout, payload);
   }
   std::vector<uint8_t> out = compress(payload, sizeof kPyramidTag);
@@ -248,13 +255,7 @@ Status decodePyramid(std::span<const uint8_t> blob, uint8_t* page, uint32_t page
   scatter(grid.data(), top, iw, tb, in.data());
   size_t at = maskBytes + grid.size();
   for (size_t l = lv.size() - 1; l-- > 0;) {
-    LevelGrids g;
-    g.values.resize(size_t(lv[l].w) * lv[l].h * tb);
-    g.cov.resize(size_t(lv[l].w) * lv[l].h);
-    g.rebuilt.resize(g.values.size());
-    gather(in.data(), iw, lv[l], tb, g.values.data());
-    gather(cov.data(), iw, lv[l], 1, g.cov.data());
-    upsampleEven(g.values.data(), g.cov.data(), lv[l].w, lv[l].h, layout, g.rebuilt.data());
+    LevelGrids g = levelOf(in.data(), cov.data(), iw, lv[l], layout);
     applyOdd(payload.data() + at, lv[l], layout, g);
     at += oddCount(lv[l]) * tb;
     scatter(g.values.data(), lv[l], iw, tb, in.data());
@@ -320,13 +321,7 @@ size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32
   size_t snapped = 0;
   for (size_t l = lv.size() - 1; l-- > 0;) {
     const Level L = lv[l];
-    LevelGrids g;
-    g.values.resize(size_t(L.w) * L.h * tb);
-    g.cov.resize(size_t(L.w) * L.h);
-    g.rebuilt.resize(g.values.size());
-    gather(texels, w, L, tb, g.values.data());
-    gather(covered, w, L, 1, g.cov.data());
-    upsampleEven(g.values.data(), g.cov.data(), L.w, L.h, layout, g.rebuilt.data());
+    const LevelGrids g = levelOf(texels, covered, w, L, layout);
     for (uint32_t j = 0; j < L.h; ++j)
       for (uint32_t i = 0; i < L.w; ++i) {
         const size_t k = size_t(j) * L.w + i;
