@@ -28,7 +28,6 @@ inline uint32_t predictAt(const uint32_t* cur, const uint32_t* prev, uint32_t i)
 
 uint32_t readValue(const uint8_t* p, int bytes) { return bytes == 2 ? uint32_t(p[0]) | uint32_t(p[1]) << 8 : p[0]; }
 
-
 // The residual byte planes of region r of `page`: component after component, low bytes first
 // (the high bytes of small residuals are runs of 0x00 and 0xff).
 std::vector<uint8_t> residualPlanes(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
@@ -131,11 +130,14 @@ void scatter(const uint8_t* g, Level L, uint32_t w, size_t tb, uint8_t* t) {
       std::memcpy(t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, g + (size_t(j) * L.w + i) * tb, tb);
 }
 
-// Per level, finest first: the grid's values, its coverage and its rebuild from the next level
+// One level as a tight grid: its values, its coverage and its rebuild from the level above
 // (upsampleEven over the grid).
 struct LevelGrids {
   std::vector<uint8_t> values, cov, rebuilt;
 };
+
+// The texels of level L that are not on the level above (not at an even column and row).
+size_t oddCount(Level L) { return size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2); }
 
 // Level L of a w-wide tile and its coverage, and the level's rebuild from the one above.
 LevelGrids levelOf(const uint8_t* tile, const uint8_t* cov, uint32_t w, Level L, TexelLayout layout) {
@@ -153,7 +155,7 @@ LevelGrids levelOf(const uint8_t* tile, const uint8_t* cov, uint32_t w, Level L,
 // The residuals of a level's texels that are not even/even (row-major) against the rebuild,
 // byte planes as residualPlanes'; applyOdd is the inverse.
 void encodeOdd(const LevelGrids& g, Level L, TexelLayout layout, std::vector<uint8_t>& out) {
-  const size_t tb = size_t(layout.texelBytes()), odd = size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2);
+  const size_t tb = size_t(layout.texelBytes()), odd = oddCount(L);
   const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
   const size_t base = out.size();
   out.resize(base + odd * tb);
@@ -173,7 +175,7 @@ void encodeOdd(const LevelGrids& g, Level L, TexelLayout layout, std::vector<uin
   }
 }
 void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g) {
-  const size_t tb = size_t(layout.texelBytes()), odd = size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2);
+  const size_t tb = size_t(layout.texelBytes()), odd = oddCount(L);
   const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
   for (int c = 0; c < layout.comps; ++c) {
     const uint8_t* lo = planes + size_t(c) * layout.bytes * odd;
@@ -191,8 +193,6 @@ void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g)
       }
   }
 }
-
-size_t oddCount(Level L) { return size_t(L.w) * L.h - size_t((L.w + 1) / 2) * ((L.h + 1) / 2); }
 
 // The pyramid blob of region r (empty for a tile too small for a level or a gutter that does
 // not repeat the tile): the coverage mask, the coarsest level's residual planes, then each finer

@@ -3,7 +3,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 #include "atlas/pack_format.h"
 #include "atlas/tile_codec.h"
