@@ -20,16 +20,18 @@ namespace {
 
 uint64_t alignUp(uint64_t v) { return (v + kSectionAlign - 1) / kSectionAlign * kSectionAlign; }
 
-uint32_t crcOf(const uint8_t* p, uint64_t n) {
-  uLong c = crc32(0L, Z_NULL, 0);
+// zlib's crc32 continued over n bytes (any size).
+uLong crc32Of(uLong c, const uint8_t* p, uint64_t n) {
   while (n > 0) {
     uInt take = static_cast<uInt>(std::min<uint64_t>(n, 1u << 30));
     c = crc32(c, p, take);
     p += take;
     n -= take;
   }
-  return static_cast<uint32_t>(c);
+  return c;
 }
+
+uint32_t crcOf(const uint8_t* p, uint64_t n) { return static_cast<uint32_t>(crc32Of(crc32(0L, Z_NULL, 0), p, n)); }
 
 uint32_t crcOfFile(int fd, uint64_t off, uint64_t n) {
   std::vector<uint8_t> buf(1 << 20);
@@ -71,8 +73,23 @@ void parallelFor(size_t n, F f) {
 // offset from the section start and size (u64 each), then the blobs in cell order.
 constexpr size_t kTileIndexHead = 8, kTileIndexEntry = 16;
 
-// Raw tile bytes coded per batch: bounds the memory of compressing a pack of any size.
-constexpr uint64_t kCompressBatchBytes = uint64_t(64) << 20;
+// Coded tile bytes copied into the final file per write.
+constexpr uint64_t kCopyBatchBytes = uint64_t(8) << 20;
+
+// The header and section table at the start of `f`.
+Status writeHeader(AtomicFile& f, const std::vector<SectionEntry>& sec, uint64_t fileSize) {
+  PackHeader h{};
+  std::memcpy(h.magic, kPackMagic, 8);
+  h.version = kPackVersion;
+  h.byteOrder = kByteOrderMark;
+  h.sectionCount = static_cast<uint32_t>(sec.size());
+  h.headerSize = sizeof(PackHeader);
+  h.fileSize = fileSize;
+  h.sectionTableOffset = sizeof(PackHeader);
+  h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
+  SA_RETURN_IF_ERROR(f.pwriteAll(&h, sizeof(h), 0));
+  return f.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h));
+}
 
 }  // namespace
 
@@ -101,7 +118,12 @@ void PackWriter::layOut(const PackMeta& meta, std::vector<CellRecord> cells, con
 Status PackWriter::open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
                         const std::string& note) {
   layOut(meta, std::move(cells), note);
+  path_ = path;
   SA_RETURN_IF_ERROR(file_.open(path));
+  if (compress_) {
+    blobs_.assign(cells_.size(), CellBlobs{});
+    return Status::ok();
+  }
   // Sparse: untouched page texels read as 0 (= not covered).
   if (ftruncate(file_.fd(), static_cast<off_t>(fileSize_)) != 0)
     return Status::internal(file_.tempPath() + ": cannot size output file: " + std::strerror(errno));
@@ -114,33 +136,97 @@ Status PackWriter::join(const std::string& tempPath, const PackMeta& meta, std::
   return file_.join(tempPath);
 }
 
+Status PackWriter::leave() {
+  if (!compress_) return file_.leave();
+  if (file_.fd() >= 0 && fsync(file_.fd()) != 0)
+    return Status::internal(file_.tempPath() + ": fsync failed: " + std::strerror(errno));
+  return Status::ok();
+}
+
+void PackWriter::adoptBlobs(const std::string& path, const std::vector<uint32_t>& ids,
+                            const std::vector<CellBlobs>& refs) {
+  sources_.push_back(path);
+  const uint32_t source = static_cast<uint32_t>(sources_.size());
+  for (size_t k = 0; k < ids.size() && k < refs.size(); ++k) {
+    if (ids[k] >= blobs_.size()) continue;
+    blobs_[ids[k]] = refs[k];
+    for (BlobRef& b : blobs_[ids[k]]) b.source = source;
+  }
+}
+
+namespace {
+
+// A tile (w x h texels of `bytes` bytes, row-major; null: all zero) with its one-texel gutter
+// repeating the edge texels: (w + 2) x (h + 2) texels.
+std::vector<uint8_t> withGutter(const uint8_t* src, uint32_t w, uint32_t h, size_t bytes) {
+  std::vector<uint8_t> out(size_t(w + 2) * (h + 2) * bytes, 0);
+  if (!src) return out;
+  for (uint32_t j = 0; j < h + 2; ++j) {
+    const uint32_t sj = std::clamp<uint32_t>(j, 1, h) - 1;
+    uint8_t* row = &out[size_t(j) * (w + 2) * bytes];
+    std::memcpy(row + bytes, src + size_t(sj) * w * bytes, size_t(w) * bytes);
+    std::memcpy(row, row + bytes, bytes);
+    std::memcpy(row + size_t(w + 1) * bytes, row + size_t(w) * bytes, bytes);
+  }
+  return out;
+}
+
+}  // namespace
+
 Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba) {
+  if (!(meta_.flags & kPackHasNormals)) normals = nullptr;
+  if (!(meta_.flags & kPackHasColor)) rgba = nullptr;
+  return compress_ ? writeCodedTile(cellIndex, heights, normals, rgba) : writeRawTile(cellIndex, heights, normals, rgba);
+}
+
+Status PackWriter::writeRawTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba) {
   const CellRecord& c = cells_[cellIndex];
   const uint32_t W = c.tileW, H = c.tileH, P = meta_.pageWidth;
   const uint64_t pageTexels = static_cast<uint64_t>(P) * meta_.pageHeight;
-  if (!(meta_.flags & kPackHasNormals)) normals = nullptr;
-  std::vector<uint16_t> row(W + 2);
-  std::vector<uint8_t> rown(normals ? (W + 2) * kNormalBytes : 0);
-  std::vector<uint8_t> rowc(rgba ? (W + 2) * 4 : 0);
-  // Rows -1 .. H (gutter rows repeat the edge rows; gutter columns repeat the edge texels).
-  for (int64_t j = -1; j <= static_cast<int64_t>(H); ++j) {
-    const uint32_t sj = static_cast<uint32_t>(std::clamp<int64_t>(j, 0, H - 1));
-    for (uint32_t i = 0; i < W + 2; ++i) {
-      const uint32_t si = std::min(std::max(i, 1u) - 1, W - 1);
-      row[i] = heights[static_cast<size_t>(sj) * W + si];
-      if (normals)
-        std::memcpy(&rown[i * kNormalBytes], &normals[(static_cast<size_t>(sj) * W + si) * kNormalBytes], kNormalBytes);
-      if (rgba) std::memcpy(&rowc[i * 4], &rgba[(static_cast<size_t>(sj) * W + si) * 4], 4);
+  const uint64_t row0 = pageTexels * c.page + static_cast<uint64_t>(c.tileY - 1) * P + (c.tileX - 1);
+  struct Layer {
+    const uint8_t* src;
+    size_t bytes;
+    uint64_t off;
+  };
+  const Layer layers[3] = {{reinterpret_cast<const uint8_t*>(heights), 2, hghtOff_},
+                           {normals, size_t(kNormalBytes), nrmlOff_},
+                           {rgba, 4, colrOff_}};
+  for (const Layer& l : layers) {
+    if (!l.src) continue;
+    const std::vector<uint8_t> t = withGutter(l.src, W, H, l.bytes);
+    const size_t rowBytes = size_t(W + 2) * l.bytes;
+    for (uint32_t j = 0; j < H + 2; ++j)
+      SA_RETURN_IF_ERROR(file_.pwriteAll(&t[j * rowBytes], rowBytes, l.off + (row0 + uint64_t(j) * P) * l.bytes));
+  }
+  return Status::ok();
+}
+
+// The tile's three layers coded (the section's layout) and appended to this process's
+// temporary; a layer the pack has but the call lacks is coded as zeros, as raw pages hold it.
+Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals,
+                                  const uint8_t* rgba) {
+  const CellRecord& c = cells_[cellIndex];
+  const TileRegion whole{0, 0, c.tileW + 2u, c.tileH + 2u};
+  const uint8_t* src[3] = {reinterpret_cast<const uint8_t*>(heights), normals, rgba};
+  const bool present[3] = {true, (meta_.flags & kPackHasNormals) != 0, (meta_.flags & kPackHasColor) != 0};
+  const TexelLayout layouts[3] = {kHeightTexels, kNormalTexels, kColorTexels};
+  for (int l = 0; l < 3; ++l) {
+    if (!present[l]) continue;
+    std::vector<uint8_t> blob;
+    {
+      const std::vector<uint8_t> t = withGutter(src[l], c.tileW, c.tileH, size_t(layouts[l].texelBytes()));
+      blob = encodeTile(t.data(), whole.w, whole, layouts[l]);
     }
-    const uint64_t texel = pageTexels * c.page + static_cast<uint64_t>(c.tileY + j) * P + (c.tileX - 1);
-    SA_RETURN_IF_ERROR(file_.pwriteAll(row.data(), row.size() * 2, hghtOff_ + texel * 2));
-    if (normals) SA_RETURN_IF_ERROR(file_.pwriteAll(rown.data(), rown.size(), nrmlOff_ + texel * kNormalBytes));
-    if (rgba) SA_RETURN_IF_ERROR(file_.pwriteAll(rowc.data(), rowc.size(), colrOff_ + texel * 4));
+    const uint64_t at = blobEnd_.fetch_add(blob.size());
+    SA_RETURN_IF_ERROR(file_.pwriteAll(blob.data(), blob.size(), at));
+    blobs_[cellIndex][size_t(l)] = BlobRef{at, blob.size(), 0, 0};
   }
   return Status::ok();
 }
 
 Status PackWriter::finish() {
+  if (compress_) return finishCompressed();
   const uint64_t pageTexels = static_cast<uint64_t>(meta_.pageWidth) * meta_.pageHeight;
   SA_RETURN_IF_ERROR(file_.pwriteAll(&meta_, sizeof(meta_), metaOff_));
   SA_RETURN_IF_ERROR(file_.pwriteAll(cells_.data(), cells_.size() * sizeof(CellRecord), cellOff_));
@@ -160,102 +246,89 @@ Status PackWriter::finish() {
   }
   sec.push_back(makeSection("NOTE", noteOff_, note_.size(),
                             crcOf(reinterpret_cast<const uint8_t*>(note_.data()), note_.size())));
-  PackHeader h{};
-  std::memcpy(h.magic, kPackMagic, 8);
-  h.version = kPackVersion;
-  h.byteOrder = kByteOrderMark;
-  h.sectionCount = static_cast<uint32_t>(sec.size());
-  h.headerSize = sizeof(PackHeader);
-  h.fileSize = fileSize_;
-  h.sectionTableOffset = sizeof(PackHeader);
-  h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
-  SA_RETURN_IF_ERROR(file_.pwriteAll(&h, sizeof(h), 0));
-  SA_RETURN_IF_ERROR(file_.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h)));
-  if (!compress_) return file_.commit();
-  const Status s = finishCompressed(sec);
+  SA_RETURN_IF_ERROR(writeHeader(file_, sec, fileSize_));
+  return file_.commit();
+}
+
+// The final file from the coded tiles: META, CELL, the page sections (each tile's blob read
+// back from the temporary that holds it, in cell order), NOTE; then the temporaries removed.
+Status PackWriter::finishCompressed() {
+  std::vector<int> fds{file_.fd()};
+  Status s = Status::ok();
+  for (const std::string& p : sources_) {
+    fds.push_back(::open(p.c_str(), O_RDONLY | O_CLOEXEC));
+    if (fds.back() < 0 && s) s = Status::internal(p + ": cannot read a cluster rank's coded tiles: " + std::strerror(errno));
+  }
+  AtomicFile out;
+  if (s) s = out.open(path_);
+  const size_t count = 3 + size_t((meta_.flags & kPackHasNormals) != 0) + size_t((meta_.flags & kPackHasColor) != 0);
+  uint64_t off = alignUp(sizeof(PackHeader) + count * sizeof(SectionEntry));
+  std::vector<SectionEntry> sec;
+  auto put = [&](const char* id, const void* data, uint64_t size) {
+    if (s && size) s = out.pwriteAll(data, size, off);
+    sec.push_back(makeSection(id, off, size, crcOf(static_cast<const uint8_t*>(data), size)));
+    off = alignUp(off + size);
+  };
+  put("META", &meta_, sizeof(meta_));
+  put("CELL", cells_.data(), cells_.size() * sizeof(CellRecord));
+  const char* ids[3] = {"HGTZ", "NRMZ", "COLZ"};
+  const bool present[3] = {true, (meta_.flags & kPackHasNormals) != 0, (meta_.flags & kPackHasColor) != 0};
+  for (int l = 0; l < 3 && s; ++l) {
+    if (!present[l]) continue;
+    sec.emplace_back();
+    s = copySection(out, fds, l, ids[l], off, sec.back());
+    off = alignUp(sec.back().offset + sec.back().size);
+  }
+  put("NOTE", note_.data(), note_.size());
+  for (size_t i = 1; i < fds.size(); ++i)
+    if (fds[i] >= 0) ::close(fds[i]);
+  if (s) s = writeHeader(out, sec, off);
+  if (s && ::ftruncate(out.fd(), off_t(off)) != 0)
+    s = Status::internal(out.tempPath() + ": cannot size the file: " + std::strerror(errno));
+  if (s) s = out.commit();
   file_.abandon();
+  for (const std::string& p : sources_) ::unlink(p.c_str());
   return s;
 }
 
-// The final file from the finished raw temporary: META, CELL, the page sections coded tile by
-// tile (read back from the temporary in batches, so memory stays bounded), NOTE.
-Status PackWriter::finishCompressed(const std::vector<SectionEntry>& raw) {
-  AtomicFile out;
-  SA_RETURN_IF_ERROR(out.open(file_.path()));
-  std::vector<SectionEntry> sec;
-  uint64_t off = alignUp(sizeof(PackHeader) + raw.size() * sizeof(SectionEntry));
-  for (const SectionEntry& r : raw) {
-    SectionEntry e = r;
-    e.offset = off;
-    const std::string id(r.id, 4);
-    if (id == "HGHT" || id == "NRML" || id == "COLR") {
-      const TexelLayout layout = id == "HGHT" ? kHeightTexels : id == "NRML" ? kNormalTexels : kColorTexels;
-      SA_RETURN_IF_ERROR(writeCompressedSection(out, id == "HGHT" ? "HGTZ" : id == "NRML" ? "NRMZ" : "COLZ", r.offset,
-                                                layout, off, e));
-    } else {
-      std::vector<uint8_t> bytes(r.size);
-      if (r.size && ::pread(file_.fd(), bytes.data(), r.size, off_t(r.offset)) != ssize_t(r.size))
-        return Status::internal(file_.tempPath() + ": cannot read back section " + id);
-      if (r.size) SA_RETURN_IF_ERROR(out.pwriteAll(bytes.data(), r.size, off));
-    }
-    sec.push_back(e);
-    off = alignUp(e.offset + e.size);
-  }
-  PackHeader h{};
-  if (::pread(file_.fd(), &h, sizeof h, 0) != ssize_t(sizeof h)) return Status::internal(file_.tempPath() + ": cannot read back");
-  h.fileSize = off;
-  h.sectionTableCrc = crcOf(reinterpret_cast<const uint8_t*>(sec.data()), sec.size() * sizeof(SectionEntry));
-  SA_RETURN_IF_ERROR(out.pwriteAll(&h, sizeof(h), 0));
-  SA_RETURN_IF_ERROR(out.pwriteAll(sec.data(), sec.size() * sizeof(SectionEntry), sizeof(h)));
-  if (::ftruncate(out.fd(), off_t(off)) != 0)
-    return Status::internal(out.tempPath() + ": cannot size the file: " + std::strerror(errno));
-  return out.commit();
-}
-
-// One page section coded (FORMAT.md, "Compressed pages") at `off` of `out`; `entry` gets its
-// id, size and checksum.
-Status PackWriter::writeCompressedSection(AtomicFile& out, const char* id, uint64_t rawOff, TexelLayout layout,
-                                          uint64_t off, SectionEntry& entry) {
-  const uint32_t P = meta_.pageWidth;
-  const uint64_t pageBytes = uint64_t(P) * meta_.pageHeight * layout.texelBytes();
+// One page section (FORMAT.md, "Compressed pages") at `off` of `out`: u32 tile count, u32 zero,
+// per tile its blob's offset from the section start and size, then the blobs in cell order,
+// read from the temporaries `fds` (by each blob's source) in batches.
+Status PackWriter::copySection(AtomicFile& out, const std::vector<int>& fds, int layer, const char* id, uint64_t off,
+                               SectionEntry& entry) {
   std::vector<uint8_t> index(kTileIndexHead + kTileIndexEntry * cells_.size(), 0);
   const uint32_t count = uint32_t(cells_.size());
   std::memcpy(index.data(), &count, 4);
   uint64_t at = index.size();  // from the section start
-  for (size_t first = 0; first < cells_.size();) {
-    size_t last = first;
-    uint64_t bytes = 0;
-    while (last < cells_.size() && (last == first || bytes < kCompressBatchBytes)) {
-      const TileRegion r = gutteredTile(cells_[last++]);
-      bytes += uint64_t(r.w) * r.h * layout.texelBytes();
-    }
-    std::vector<std::vector<uint8_t>> blobs(last - first);
-    std::vector<Status> status(last - first, Status::ok());
-    parallelFor(last - first, [&](size_t k) {
-      const CellRecord& c = cells_[first + k];
-      const TileRegion r = gutteredTile(c);
-      const size_t rowBytes = size_t(r.w) * layout.texelBytes();
-      std::vector<uint8_t> tile(rowBytes * r.h);
-      for (uint32_t j = 0; j < r.h; ++j) {
-        const uint64_t src = rawOff + c.page * pageBytes + ((uint64_t(r.y) + j) * P + r.x) * layout.texelBytes();
-        if (::pread(file_.fd(), tile.data() + j * rowBytes, rowBytes, off_t(src)) != ssize_t(rowBytes)) {
-          status[k] = Status::internal(file_.tempPath() + ": cannot read back a tile");
-          return;
-        }
-      }
-      blobs[k] = encodeTile(tile.data(), r.w, {0, 0, r.w, r.h}, layout);
-    });
-    for (size_t k = 0; k < blobs.size(); ++k) {
-      SA_RETURN_IF_ERROR(status[k]);
-      const uint64_t e[2] = {at, blobs[k].size()};
-      std::memcpy(index.data() + kTileIndexHead + kTileIndexEntry * (first + k), e, sizeof e);
-      SA_RETURN_IF_ERROR(out.pwriteAll(blobs[k].data(), blobs[k].size(), off + at));
-      at += blobs[k].size();
-    }
-    first = last;
+  for (size_t i = 0; i < cells_.size(); ++i) {
+    const BlobRef& b = blobs_[i][size_t(layer)];
+    if (b.size == 0 || b.source >= fds.size())
+      return Status::internal(path_ + ": cell " + std::to_string(i) + " has no coded tile in " + id);
+    const uint64_t e[2] = {at, b.size};
+    std::memcpy(index.data() + kTileIndexHead + kTileIndexEntry * i, e, sizeof e);
+    at += b.size;
   }
   SA_RETURN_IF_ERROR(out.pwriteAll(index.data(), index.size(), off));
-  entry = makeSection(id, off, at, crcOfFile(out.fd(), off, at));
+  uLong crc = crc32(crc32(0L, Z_NULL, 0), index.data(), uInt(index.size()));
+  std::vector<uint8_t> buf;
+  uint64_t written = index.size();
+  auto flush = [&]() -> Status {
+    crc = crc32Of(crc, buf.data(), buf.size());
+    SA_RETURN_IF_ERROR(out.pwriteAll(buf.data(), buf.size(), off + written));
+    written += buf.size();
+    buf.clear();
+    return Status::ok();
+  };
+  for (size_t i = 0; i < cells_.size(); ++i) {
+    const BlobRef& b = blobs_[i][size_t(layer)];
+    const size_t at0 = buf.size();
+    buf.resize(at0 + b.size);
+    if (::pread(fds[b.source], buf.data() + at0, b.size, off_t(b.offset)) != ssize_t(b.size))
+      return Status::internal(path_ + ": cannot read back the coded tile of cell " + std::to_string(i));
+    if (buf.size() >= kCopyBatchBytes) SA_RETURN_IF_ERROR(flush());
+  }
+  SA_RETURN_IF_ERROR(flush());
+  entry = makeSection(id, off, at, static_cast<uint32_t>(crc));
   return Status::ok();
 }
 

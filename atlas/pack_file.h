@@ -1,8 +1,11 @@
 // Writing and reading pack files (docs/FORMAT.md). The writer lays the file out up front
 // (the cell table and tile placements are known before any height map exists), then height
-// maps are written tile by tile with pwrite, so the atlas is never held in memory. The reader
-// maps the file; page sections are used in place.
+// maps are written tile by tile with pwrite (compressed pages: coded per tile and appended to a
+// temporary), so the atlas is never held in memory. The reader maps the file; page sections
+// are used in place.
 #pragma once
+#include <array>
+#include <atomic>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -19,17 +22,30 @@ namespace sa {
 
 class PackWriter {
  public:
-  // `cells` must already carry their tile placements; `meta` the page size and count.
+  // Where a cell's coded tile of one page section lies: which blob file (0: this process's),
+  // its offset there and its size.
+  struct BlobRef {
+    uint64_t offset = 0, size = 0;
+    uint32_t source = 0, pad = 0;
+  };
+  using CellBlobs = std::array<BlobRef, 3>;  // heights, normals, colours
+
+  // `cells` must already carry their tile placements; `meta` the page size and count. With
+  // compressed pages (setCompressPages first) every process of a cluster pack opens its own
+  // writer: the coded tiles go to a temporary beside `path`, and finish() writes `path`.
   Status open(const std::string& path, const PackMeta& meta, std::vector<CellRecord> cells,
               const std::string& note);
-  // Writes tiles into the temporary another process opened with the same meta, cells and note
-  // (a cluster pack's other ranks); leave() instead of finish().
+  // Raw pages: writes tiles into the temporary another process opened with the same meta,
+  // cells and note (a cluster pack's other ranks); leave() instead of finish().
   Status join(const std::string& tempPath, const PackMeta& meta, std::vector<CellRecord> cells,
               const std::string& note);
-  Status leave() { return file_.leave(); }
+  // A cluster rank other than 0 after its tiles: syncs what it wrote, which rank 0 then reads
+  // (compressed pages: this process's temporary stays until the writer is destroyed).
+  Status leave();
   // Writes one tile (tileW x tileH, row-major) and its gutter: heights, encoded normals
   // (kNormalBytes per texel; may be null when the pack has no normal pages) and colours (4 bytes; may be null
-  // when the pack has no colour). Thread-safe for different cells.
+  // when the pack has no colour). Compressed pages: codes the tile at once (tile_codec.h) and
+  // appends it to the temporary, so raw pages are never written. Thread-safe for different cells.
   Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
   // Widens a cell's height range before its tile is written (not thread-safe for the same
   // cell; different cells may be updated concurrently).
@@ -43,25 +59,38 @@ class PackWriter {
     meta_ = meta;
     meta_.cellCount = cells;
   }
-  // Compressed pages (FORMAT.md): finish() writes HGTZ, NRMZ, COLZ instead of HGHT, NRML, COLR.
+  // Compressed pages (FORMAT.md): HGTZ, NRMZ, COLZ instead of HGHT, NRML, COLR. Before open().
   void setCompressPages(bool on) { compress_ = on; }
   // Computes checksums, writes header, META and CELL, fsyncs and renames into place (with
-  // compressed pages: codes the finished temporary's tiles into the final file).
+  // compressed pages: the final file from the coded tiles, in cell order, and the temporaries
+  // removed).
   Status finish();
   const std::string& tempPath() const { return file_.tempPath(); }
   const CellRecord& cell(uint32_t i) const { return cells_[i]; }
+  // Compressed pages: a cell's coded tiles in this process's temporary, and the bytes coded so far.
+  const CellBlobs& blobs(uint32_t i) const { return blobs_[i]; }
+  uint64_t codedBytes() const { return blobEnd_.load(); }
+  // Compressed pages, rank 0 of a cluster pack: another rank's temporary and the coded tiles
+  // it holds of cells `ids` (their refs' source is ignored).
+  void adoptBlobs(const std::string& path, const std::vector<uint32_t>& ids, const std::vector<CellBlobs>& refs);
 
  private:
   void layOut(const PackMeta& meta, std::vector<CellRecord> cells, const std::string& note);
-  Status finishCompressed(const std::vector<SectionEntry>& raw);
-  Status writeCompressedSection(AtomicFile& out, const char* id, uint64_t rawOff, TexelLayout layout, uint64_t off,
-                                SectionEntry& entry);
-  AtomicFile file_;
+  Status writeRawTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
+  Status writeCodedTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
+  Status finishCompressed();
+  Status copySection(AtomicFile& out, const std::vector<int>& fds, int layer, const char* id, uint64_t off,
+                     SectionEntry& entry);
+  AtomicFile file_;  // raw pages: the output's temporary; compressed: this process's coded tiles
+  std::string path_;
   PackMeta meta_{};
   std::vector<CellRecord> cells_;
   std::string note_;
   bool compress_ = false;
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
+  std::atomic<uint64_t> blobEnd_{0};
+  std::vector<CellBlobs> blobs_;
+  std::vector<std::string> sources_;  // adopted temporaries: source 1, 2, ...
 };
 
 // A cell's tile with its one-texel gutter: what a page holds of it.

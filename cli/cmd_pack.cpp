@@ -255,7 +255,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                 "\"chunks\": %u, \"pages\": %u, \"page_width\": %u, \"page_height\": %u, "
                 "\"texels\": %llu, \"texel_size\": %.9g, \"texel_min\": %.9g, \"texel_max\": %.9g, \"sample_spacing\": %.9g, \"area_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
                 "\"up_source\": \"%s\", \"bytes\": %llu, "
-                "\"bytes_per_point\": %.3f, \"scratch_bytes\": %llu, \"scratch_raw_bytes\": %llu, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
+                "\"bytes_per_point\": %.3f, \"scratch_bytes\": %llu, \"scratch_raw_bytes\": %llu, \"scratch_coded_bytes\": %llu, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
                 "\"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
                 (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.layeredCells,
@@ -263,7 +263,8 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                 (unsigned long long)sum.texels, sum.texelSize, sum.texelMin, sum.texelMax, sum.spacing, sum.areaSpacing, sum.up.x(), sum.up.y(), sum.up.z(),
                 upSourceName(sum.upSource),
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
-                (unsigned long long)sum.scratchBytes, (unsigned long long)sum.scratchRawBytes, sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
+                (unsigned long long)sum.scratchBytes, (unsigned long long)sum.scratchRawBytes,
+                (unsigned long long)sum.codedScratchBytes, sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
                 sum.hasColor ? "true" : "false");
     for (size_t i = 0; i < sum.cellsPerLevel.size(); ++i) std::printf("%s%u", i ? ", " : "", sum.cellsPerLevel[i]);
     std::printf("], \"seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
@@ -278,7 +279,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                  "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
                  "  texels %llu (texel %.4g, %.4g-%.4g over cells; spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
                  "  up %.3g,%.3g,%.3g (%s)\n"
-                 "  file %.1f MiB (%.1f bytes/point), temporary chunk files %.1f MiB written\n"
+                 "  file %.1f MiB (%.1f bytes/point), temporary files %.1f MiB written (chunks %.1f, coded tiles %.1f)\n"
                  "  time %.2fs (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f) = %.2f Mpts/s\n"
                  "  cores busy %.2f of %u%s (count %.2f, distribute %.2f, normals+octree %.2f, heightmaps %.2f, write %.2f)\n",
                  out.c_str(), (unsigned long long)sum.pointsRead,
@@ -289,8 +290,9 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                  sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
                  sum.normalsEstimated ? ", normals estimated" : "", sum.up.x(), sum.up.y(), sum.up.z(),
                  upSourceName(sum.upSource), sum.fileBytes / 1048576.0,
-                 double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)), sum.scratchBytes / 1048576.0,
-                 sum.seconds[5], sum.seconds[0],
+                 double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
+                 (sum.scratchBytes + sum.codedScratchBytes) / 1048576.0, sum.scratchBytes / 1048576.0,
+                 sum.codedScratchBytes / 1048576.0, sum.seconds[5], sum.seconds[0],
                  sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts, busy(5),
                  cores, ranks.c_str(), busy(0), busy(1), busy(2), busy(3), busy(4));
   }

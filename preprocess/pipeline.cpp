@@ -1033,12 +1033,16 @@ Status tilesPhase(PackJob& job, PackWriter& writer) {
 struct RankReport {
   std::vector<uint32_t> ids;
   std::vector<std::array<double, 2>> heights;
+  std::string codedPath;                         // compressed pages: the rank's coded tiles
+  std::vector<PackWriter::CellBlobs> coded;      // per id: where in codedPath
   std::array<double, 3> cpu{};      // normals + octree, heightmaps, the whole run
-  std::array<uint64_t, 3> stats{};  // chunk bytes, their raw bytes, threads
+  std::array<uint64_t, 4> stats{};  // chunk bytes, their raw bytes, threads, coded tile bytes
   template <class IO>
   void io(IO& b) {
     b.io(ids);
     b.io(heights);
+    b.io(codedPath);
+    b.io(coded);
     b.io(cpu);
     b.io(stats);
   }
@@ -1055,9 +1059,12 @@ Status joinTiles(PackJob& job, PackWriter& writer, Status s) {
     if (job.owners[job.cells[i].chunk] == Cluster::rank()) {
       mine.ids.push_back(i);
       mine.heights.push_back({writer.cell(i).box[4], writer.cell(i).box[5]});
+      if (job.opt.compressPages) mine.coded.push_back(writer.blobs(i));
     }
+  mine.codedPath = writer.tempPath();
   mine.cpu = {job.sum.cpuSeconds[2], job.sum.cpuSeconds[3], processCpuSeconds()};
-  mine.stats = {chunkBytesWritten() - job.scratch0, chunkRecordBytesWritten() - job.raw0, uint64_t(Cluster::threads())};
+  mine.stats = {chunkBytesWritten() - job.scratch0, chunkRecordBytesWritten() - job.raw0, uint64_t(Cluster::threads()),
+                writer.codedBytes()};
   ByteWriter w;
   mine.io(w);
   const std::vector<std::vector<uint8_t>> all = Cluster::allGather(w.bytes());
@@ -1067,12 +1074,14 @@ Status joinTiles(PackJob& job, PackWriter& writer, Status s) {
     ByteReader r(all[rank]);
     other.io(r);
     for (size_t k = 0; k < other.ids.size(); ++k) writer.setCellHeights(other.ids[k], other.heights[k][0], other.heights[k][1]);
+    if (job.opt.compressPages) writer.adoptBlobs(other.codedPath, other.ids, other.coded);
     job.sum.cpuSeconds[2] += other.cpu[0];
     job.sum.cpuSeconds[3] += other.cpu[1];
     job.otherCpu += other.cpu[2];
     job.otherScratch[0] += other.stats[0];
     job.otherScratch[1] += other.stats[1];
     job.sum.threads += static_cast<uint32_t>(other.stats[2]);
+    job.sum.codedScratchBytes += other.stats[3];
   }
   return Status::ok();
 }
@@ -1198,10 +1207,12 @@ Status shareRootPhases(PackJob& job, const Status& s) {
 // Rank 0 creates the output's temporary; the other ranks write their tiles into it.
 Status openWriter(const PackJob& job, const std::string& outPath, PackWriter& writer) {
   const std::string note = makeNote(job);
-  Status s = Cluster::rank() == 0 ? writer.open(outPath, job.meta, job.records, note) : Status::ok();
   writer.setCompressPages(job.opt.compressPages);
+  // Compressed pages: every rank codes its tiles into a temporary of its own (joinTiles).
+  const bool own = job.opt.compressPages || Cluster::rank() == 0;
+  Status s = own ? writer.open(outPath, job.meta, job.records, note) : Status::ok();
   SA_RETURN_IF_ERROR(Cluster::agree(s));
-  if (!Cluster::distributed()) return Status::ok();
+  if (!Cluster::distributed() || job.opt.compressPages) return Status::ok();
   ByteWriter w;
   if (Cluster::rank() == 0) w.put(writer.tempPath());
   Cluster::broadcast(w.bytes());
@@ -1230,6 +1241,7 @@ Status writePack(PackJob& job, PackWriter& writer, const std::string& outPath, c
   sum.cpuSeconds[5] += job.otherCpu;
   sum.scratchBytes = chunkBytesWritten() - job.scratch0 + job.otherScratch[0];
   sum.scratchRawBytes = chunkRecordBytesWritten() - job.raw0 + job.otherScratch[1];
+  sum.codedScratchBytes += writer.codedBytes();
   if (job.progress) job.progress("write", 1, 1);
   auto sz = fileSize(outPath);
   sum.fileBytes = sz ? *sz : 0;

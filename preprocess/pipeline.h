@@ -65,6 +65,7 @@ struct PackSummary {
   uint64_t texels = 0, fileBytes = 0;
   uint64_t scratchBytes = 0;     // written to temporary chunk files (compressed)
   uint64_t scratchRawBytes = 0;  // the same records uncompressed
+  uint64_t codedScratchBytes = 0;  // coded tiles written to temporaries before the final file (compressed pages)
   double spacing = 0, areaSpacing = 0, texelSize = 0;  // texelSize: the median over cells
   double texelMin = 0, texelMax = 0;                     // the cells' finest and coarsest texels
   double seconds[6] = {0, 0, 0, 0, 0, 0};     // count, distribute, normals+octree, heightmaps, write, total

@@ -168,10 +168,20 @@ TEST(PackFile, CompressedPagesDecodeToTheRawPagesAndDamageIsNamed) {
       w.setCompressPages(compress);
       const std::string path = d.file(compress ? "z.hfa" : "raw.hfa");
       ASSERT_TRUE(w.open(path, sp.meta, sp.cells, "note").isOk());
-      for (uint32_t i = 0; i < sp.cells.size(); ++i)
+      // Compressed: tiles coded as they come, last cell first (threads finish in any order);
+      // the final file holds them in cell order.
+      const uint32_t n = uint32_t(sp.cells.size());
+      for (uint32_t k = 0; k < n; ++k) {
+        const uint32_t i = compress ? n - 1 - k : k;
         ASSERT_TRUE(w.writeTile(i, sp.heights[i].data(), sp.normals[i].data(), sp.rgba[i].data()).isOk());
+      }
+      const std::string temp = w.tempPath();
+      if (compress) {
+        EXPECT_GT(w.codedBytes(), 0u);
+        EXPECT_EQ(std::filesystem::file_size(temp), w.codedBytes()) << "only coded tiles are written before finish";
+      }
       ASSERT_TRUE(w.finish().isOk());
-      EXPECT_FALSE(std::filesystem::exists(w.tempPath())) << "the raw temporary is gone";
+      EXPECT_FALSE(std::filesystem::exists(temp)) << "the temporary is gone";
       sizes.push_back(std::filesystem::file_size(path));
     }
     PackReader raw, z;

@@ -717,6 +717,26 @@ TEST(Cli, PrecisionOptionsAreRecordedAndReported) {
   }
 }
 
+// Compressed pages are coded while the tiles are made: the temporaries are the chunks and the
+// coded tiles (about the pack's size, not the raw atlas), reported, and gone afterwards.
+TEST(Cli, PackReportsItsTemporariesAndLeavesNone) {
+  test::TempDir d;
+  const std::string las = test::sharedData("lidar/autzen_trim.las");
+  CmdResult z = run("pack " + las + " -o " + d.file("z.hfa") + " --json");
+  CmdResult raw = run("pack " + las + " -o " + d.file("raw.hfa") + " --raw-pages --json");
+  ASSERT_EQ(z.code, 0);
+  ASSERT_EQ(raw.code, 0);
+  auto zj = nlohmann::json::parse(z.out), rj = nlohmann::json::parse(raw.out);
+  const double coded = zj["scratch_coded_bytes"].get<double>(), bytes = zj["bytes"].get<double>();
+  std::printf("autzen: chunks %.0f bytes, coded tiles %.0f, pack %.0f\n", zj["scratch_bytes"].get<double>(), coded, bytes);
+  EXPECT_GT(coded, 0.5 * bytes);
+  EXPECT_LT(coded, bytes);
+  EXPECT_EQ(rj["scratch_coded_bytes"].get<double>(), 0) << "raw pages are written in place";
+  EXPECT_GT(zj["scratch_bytes"].get<double>(), 0);
+  EXPECT_FALSE(anyTemporary(d.path()));
+  EXPECT_EQ(run("verify " + d.file("z.hfa")).code, 0);
+}
+
 TEST(Cli, InfoSaysWhenATexelCapLoweredTheResolution) {
   test::TempDir d;
   const std::string bunny = test::sharedData("stanford_bunny/reconstruction/bun_zipper.ply");
