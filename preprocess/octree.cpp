@@ -136,7 +136,8 @@ struct OctreeBuild {
       fit.heightField = false;
       fit.layered = true;
     }
-    if (fit.heightField || !canSplit) {
+    const bool tooLarge = params.maxLeafPoints && it.count > params.maxLeafPoints;
+    if ((fit.heightField && !tooLarge) || !canSplit) {
       OctreeCell c;
       c.fit = fit;
       c.first = it.first;

@@ -32,6 +32,9 @@ struct OctreeParams {
   // whatever its normals say. Both in world units, set from the sample spacing.
   double layerBin = 0, layerGap = 0;
   uint32_t layeredBins = 3;
+  // A height-field cell with more points is split all the same (0: no limit): bounds the
+  // working memory of the cell's tile (the pack pipeline sets it from --mem-budget).
+  uint32_t maxLeafPoints = 0;
 };
 
 struct PlaneFit {

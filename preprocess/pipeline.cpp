@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <mutex>
@@ -432,6 +433,7 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   op.maxDepth = std::max(op.maxDepth, ch.level);
   if (op.outlierFraction < 0) op.outlierFraction = job.triangles ? 0.0 : kPointOutlierFraction;
   if (op.minSplitPoints == 0) op.minSplitPoints = job.triangles ? kMeshMinSplit : kPointMinSplit;
+  if (op.maxLeafPoints == 0 && !job.triangles) op.maxLeafPoints = maxLeafPoints(job.opt.memBudget);
   if (sp > 0 && op.layerGap == 0) {
     // Layers farther apart than twice the coverage radius would leave the surface between
     // them uncovered: such a cell is not one height field.
@@ -956,6 +958,46 @@ void reducePrecision(const Precision& p, const TileGrid& g, TileOutput& tile) {
   if (p.colourTolerance > 0) snapColours(tile, g.width, g.height, p.colourTolerance);
 }
 
+// Bytes shared by threads that each take some before their work and give them back after: a
+// thread waits while what the others hold and what it asks for exceed the limit, unless it
+// would be alone (a single larger piece of work still runs, by itself).
+class ByteGate {
+ public:
+  explicit ByteGate(uint64_t limit) : limit_(limit) {}
+  void take(uint64_t bytes) {
+    std::unique_lock<std::mutex> lock(mu_);
+    free_.wait(lock, [&] { return held_ == 0 || held_ + bytes <= limit_; });
+    held_ += bytes;
+  }
+  void give(uint64_t bytes) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      held_ -= bytes;
+    }
+    free_.notify_all();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable free_;
+  uint64_t held_ = 0;
+  const uint64_t limit_;
+};
+
+// A tile's working bytes at their peak (kTileBytesPerTexel, kTileBytesPerSample; a point
+// cell's samples include its margin, about a third more).
+uint64_t tileBytes(const PackJob& job, uint32_t id) {
+  const CellRecord& r = job.records[id];
+  const uint64_t samples = job.triangles ? 0 : job.cells[id].count + job.cells[id].count / 3;
+  return uint64_t(r.tileW) * r.tileH * kTileBytesPerTexel + samples * kTileBytesPerSample;
+}
+
+// What --mem-budget leaves for tiles while a chunk of `points` is loaded (at least a quarter).
+uint64_t tileBudget(const PackJob& job, size_t points) {
+  const uint64_t chunk = uint64_t(points) * kChunkBytesPerPointInTiles;
+  return std::max(job.opt.memBudget / 4, job.opt.memBudget > chunk ? job.opt.memBudget - chunk : 0);
+}
+
 // ---- pass B, one chunk: every cell's tile ----
 Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer, ChunkTicker& ticker) {
   std::vector<ChunkPoint> pts;
@@ -971,10 +1013,13 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
   Status failed;
   std::mutex failMu;
   const Precision precision = effectivePrecision(job.opt, job.triangles);
+  ByteGate gate(tileBudget(job, pts.size()));
   tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
     TileOutput tile;
     for (size_t m = rr.begin(); m < rr.end(); ++m) {
       const uint32_t id = mine[m];
+      const uint64_t bytes = tileBytes(job, id);
+      gate.take(bytes);
       CellRecord& r = job.records[id];
       TileGrid g;
       g.width = r.tileW;
@@ -999,6 +1044,8 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
       reducePrecision(precision, g, tile);
       Status s = writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
                                   withColor ? tile.rgba.data() : nullptr);
+      tile = TileOutput{};  // its pages go with the bytes given back
+      gate.give(bytes);
       ticker.add(job.cells[id].count);
       if (!s) {
         std::lock_guard<std::mutex> lock(failMu);
@@ -1096,7 +1143,7 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 9;  // 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 10;  // 10: point cells split past maxLeafPoints; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,

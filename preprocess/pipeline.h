@@ -1,6 +1,7 @@
 // `scanatlas pack`: input files -> out-of-core chunks -> octree height fields -> height maps
 // -> pack file. Memory is bounded by PackOptions::memBudget for point inputs.
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -92,6 +93,20 @@ inline constexpr double kLocalTexelRefine = 4;
 // Bytes of working memory per point while a chunk is processed (records, positions,
 // normals, neighbour grid, tile samples); sets the chunk size from the memory budget.
 inline constexpr uint64_t kBytesPerPointInFlight = 240;
+// The heightmaps phase: bytes a chunk holds per point while its tiles are made (record,
+// position, normal, margin index), and a tile's working bytes at their peak per texel (the
+// pull-push pyramid with colour and normal channels, surface, coverage, output and coded
+// pages) and per sample. The tiles made at once are limited to the budget the chunk leaves.
+inline constexpr uint64_t kChunkBytesPerPointInTiles = 96;
+inline constexpr uint64_t kTileBytesPerTexel = 80;
+inline constexpr uint64_t kTileBytesPerSample = 48;
+// A point cell's most points under a memory budget: its tile's working bytes (at
+// kMaxTexelsPerPoint texels a point, a quarter more for the tile's pad, and its samples with
+// their margin) within a quarter of the budget, so that tiles fit beside their chunk.
+inline uint32_t maxLeafPoints(uint64_t memBudget) {
+  const uint64_t perPoint = kTileBytesPerTexel * kMaxTexelsPerPoint * 5 / 4 + kTileBytesPerSample * 4 / 3;
+  return static_cast<uint32_t>(std::clamp<uint64_t>(memBudget / 4 / perPoint, 4096, UINT32_MAX));
+}
 
 Status packInput(const InputSet& input, const std::string& outPath, const PackOptions& options,
                  const ProgressFn& progress, PackSummary& summary);

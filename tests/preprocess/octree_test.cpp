@@ -52,6 +52,32 @@ TEST(Octree, TiltedPlaneIsOneCell) {
   EXPECT_GT(cells[0].fit.w.dot(n), 0);  // W agrees with the normals
 }
 
+// maxLeafPoints bounds a tile's memory: a plane that is one height field is split until no
+// cell holds more points, and every piece is still a height field.
+TEST(Octree, HeightFieldsLargerThanMaxLeafPointsAreSplit) {
+  Cloud c;
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> U(-0.9, 0.9);
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, 0.2, 1).normalized();
+  for (int i = 0; i < 20000; ++i) {
+    Eigen::Vector3d p(U(rng), U(rng), 0);
+    p.z() = -(n.x() * p.x() + n.y() * p.y()) / n.z();
+    c.add(p, n);
+  }
+  OctreeParams p;
+  p.maxLeafPoints = 3000;
+  const auto cells = build(c, p);
+  EXPECT_GE(cells.size(), 20000u / 3000u);
+  size_t total = 0;
+  for (const auto& cell : cells) {
+    EXPECT_LE(cell.count, p.maxLeafPoints);
+    EXPECT_TRUE(cell.fit.heightField);
+    total += cell.count;
+  }
+  EXPECT_EQ(total, 20000u);
+  EXPECT_EQ(build(c).size(), 1u) << "no limit: one cell";
+}
+
 TEST(Octree, SphereSplitsIntoAtLeastEightHeightFields) {
   Cloud c;
   std::vector<Eigen::Vector3d> pts, nrm;

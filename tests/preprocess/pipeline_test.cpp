@@ -84,6 +84,8 @@ TEST(Pipeline, TinyMemoryBudgetGivesSameResultThroughManyChunks) {
   PackOptions big, small;
   small.memBudget = 16u << 20;  // 16 MiB: about 70K points per chunk
   big.texelSize = small.texelSize = 0.01;
+  // The budget also bounds a cell's points (maxLeafPoints): the same bound for both.
+  big.octree.maxLeafPoints = small.octree.maxLeafPoints = maxLeafPoints(small.memBudget);
   PackSummary a, b;
   ASSERT_TRUE(packInput(*in, d.file("a.hfa"), big, nullptr, a).isOk());
   ASSERT_TRUE(packInput(*in, d.file("b.hfa"), small, nullptr, b).isOk());
