@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <map>
+#include <memory>
 
 #include <Eigen/Geometry>
 
@@ -189,12 +190,29 @@ class BoundsSink : public BatchSink {
   uint8_t first_[3] = {0, 0, 0};
 };
 
-// Buffers records per chunk node and appends them to the node's file when full.
+// An octree node: level and key (keyOf) in one number.
+uint64_t nodeId(int level, uint64_t key) { return (uint64_t(level) << 40) | key; }
+int levelOfNode(uint64_t id) { return int(id >> 40); }
+uint64_t keyOfNode(uint64_t id) { return id & ((uint64_t(1) << 40) - 1); }
+
+ChunkInfo chunkInfoOf(const std::string& path, uint64_t id, uint64_t count) {
+  ChunkInfo ch;
+  ch.path = path;
+  ch.count = count;
+  ch.level = levelOfNode(id);
+  const uint64_t key = keyOfNode(id), mask = (uint64_t(1) << ch.level) - 1;
+  ch.ix = uint32_t((key >> (2 * ch.level)) & mask);
+  ch.iy = uint32_t((key >> ch.level) & mask);
+  ch.iz = uint32_t(key & mask);
+  return ch;
+}
+
+// Buffers records per chunk node (nodeId) and appends them to the node's file when full.
 class ChunkFiles {
  public:
-  ChunkFiles(const std::string& dir, int level) : dir_(dir), level_(level) {}
-  std::string pathOf(uint64_t key) const {
-    return joinPath(dir_, "chunk_L" + std::to_string(level_) + "_" + std::to_string(key) + ".bin");
+  explicit ChunkFiles(const std::string& dir) : dir_(dir) {}
+  std::string pathOf(uint64_t id) const {
+    return joinPath(dir_, "chunk_L" + std::to_string(levelOfNode(id)) + "_" + std::to_string(keyOfNode(id)) + ".bin");
   }
   Status add(uint64_t key, const ChunkPoint& p) {
     Node& n = nodes_[key];
@@ -228,7 +246,6 @@ class ChunkFiles {
     return Status::ok();
   }
   std::string dir_;
-  int level_;
   std::map<uint64_t, Node> nodes_;
 };
 
@@ -236,11 +253,112 @@ uint64_t keyOf(uint32_t ix, uint32_t iy, uint32_t iz, int level) {
   return (uint64_t(ix) << (2 * level)) | (uint64_t(iy) << level) | uint64_t(iz);
 }
 
+// A point's quantized position (Quantizer over the root cube, relative to the pack origin) and
+// the key of its node at a level.
+void quantize(const PointBatch& b, size_t i, const Quantizer& qz, const Eigen::Vector3d& origin, uint32_t q[3]) {
+  const double rel[3] = {b.x[i] - origin.x(), b.y[i] - origin.y(), b.z[i] - origin.z()};
+  for (int a = 0; a < 3; ++a) q[a] = qz.encode(rel[a], a);
+}
+uint64_t keyAt(const uint32_t q[3], int level) {
+  if (level == 0) return 0;
+  const int shift = 32 - level;
+  return keyOf(q[0] >> shift, q[1] >> shift, q[2] >> shift, level);
+}
+
+// ---- the chunk plan: the chunks known before any point is written ----
+// Splitting an over-full chunk file rewrites its points (a third of a 100 M-point pack's
+// temporary bytes). Where the input may hold more points than one chunk takes, a counting pass
+// over the input first gives the points per node down to kPlanLevel, and each point then goes
+// straight to the chunk the split loop of distributePoints would have ended with: the same
+// chunks, in the same order, each file written once (a node still over-full at kPlanLevel is
+// split as before).
+constexpr int kPlanLevel = 6;  // 8^6 counters: 2 MiB
+
+class HistogramSink : public BatchSink {
+ public:
+  HistogramSink(const Quantizer& qz, const Eigen::Vector3d& origin, int level, const ProgressFn& p, uint64_t total)
+      : qz_(qz), origin_(origin), level_(level), counts_(size_t(1) << (3 * level), 0), progress_(p), total_(total) {}
+  Status onPoints(const PointBatch& b) override {
+    for (size_t i = 0; i < b.size(); ++i) {
+      if (!finite3(b.x[i], b.y[i], b.z[i])) continue;
+      uint32_t q[3];
+      quantize(b, i, qz_, origin_, q);
+      ++counts_[keyAt(q, level_)];
+    }
+    seen_ += b.size();
+    if (progress_) progress_("distribute", seen_ / 2, total_);
+    return Status::ok();
+  }
+  std::vector<uint64_t>& counts() { return counts_; }
+
+ private:
+  const Quantizer& qz_;
+  Eigen::Vector3d origin_;
+  int level_;
+  std::vector<uint64_t> counts_;
+  const ProgressFn& progress_;
+  uint64_t total_, seen_ = 0;
+};
+
+struct ChunkPlan {
+  int level = 0;                // kPlanLevel or the deepest chunk level, if shallower
+  std::vector<uint64_t> leafOf;  // per node at `level`: the nodeId of the chunk that holds it
+  std::vector<uint64_t> leaves;  // the chunks (nodeId) in the order the split loop ends with them
+  uint64_t nodeOf(const uint32_t q[3]) const { return leafOf[keyAt(q, level)]; }
+};
+
+// The plan from the points per node at plan.level (`counts`), starting at `start` as
+// distributePoints does.
+ChunkPlan planChunks(std::vector<uint64_t> counts, int H, int start, const DistributeOptions& opt) {
+  std::vector<std::vector<uint64_t>> cnt(size_t(H) + 1);
+  cnt[size_t(H)] = std::move(counts);
+  for (int l = H - 1; l >= start; --l) {
+    cnt[size_t(l)].assign(size_t(1) << (3 * l), 0);
+    const uint32_t side = 1u << (l + 1);
+    for (uint32_t x = 0; x < side; ++x)
+      for (uint32_t y = 0; y < side; ++y)
+        for (uint32_t z = 0; z < side; ++z)
+          cnt[size_t(l)][keyOf(x / 2, y / 2, z / 2, l)] += cnt[size_t(l) + 1][keyOf(x, y, z, l + 1)];
+  }
+  ChunkPlan plan;
+  plan.level = H;
+  std::vector<uint64_t> stack;
+  for (uint64_t k = 0; k < cnt[size_t(start)].size(); ++k)
+    if (cnt[size_t(start)][k]) stack.push_back(nodeId(start, k));
+  while (!stack.empty()) {
+    const uint64_t id = stack.back();
+    stack.pop_back();
+    const int l = levelOfNode(id);
+    const uint64_t key = keyOfNode(id), mask = (uint64_t(1) << l) - 1;
+    if (cnt[size_t(l)][key] <= opt.maxPointsPerChunk || l >= opt.maxChunkLevel || l >= H) {
+      plan.leaves.push_back(id);
+      continue;
+    }
+    const uint32_t ix = uint32_t((key >> (2 * l)) & mask), iy = uint32_t((key >> l) & mask), iz = uint32_t(key & mask);
+    for (uint32_t d = 0; d < 8; ++d) {  // ascending child keys: x, then y, then z
+      const uint64_t child = keyOf(2 * ix + (d >> 2), 2 * iy + ((d >> 1) & 1), 2 * iz + (d & 1), l + 1);
+      if (cnt[size_t(l) + 1][child]) stack.push_back(nodeId(l + 1, child));
+    }
+  }
+  plan.leafOf.assign(size_t(1) << (3 * H), 0);
+  for (uint64_t id : plan.leaves) {
+    const int l = levelOfNode(id);
+    const uint64_t key = keyOfNode(id), mask = (uint64_t(1) << l) - 1;
+    const uint32_t s = 1u << (H - l);
+    const uint32_t x0 = uint32_t((key >> (2 * l)) & mask) * s, y0 = uint32_t((key >> l) & mask) * s,
+                   z0 = uint32_t(key & mask) * s;
+    for (uint32_t x = x0; x < x0 + s; ++x)
+      for (uint32_t y = y0; y < y0 + s; ++y)
+        for (uint32_t z = z0; z < z0 + s; ++z) plan.leafOf[keyOf(x, y, z, H)] = id;
+  }
+  return plan;
+}
+
 class DistributeSink : public BatchSink {
  public:
-  DistributeSink(const Quantizer& qz, const DistributeOptions& opt, ChunkFiles& files, int level,
+  DistributeSink(const Quantizer& qz, const DistributeOptions& opt, ChunkFiles& files, int level, const ChunkPlan* plan,
                  DistributeResult& out, const ProgressFn& p, uint64_t total)
-      : qz_(qz), opt_(opt), files_(files), level_(level), out_(out), progress_(p), total_(total) {
+      : qz_(qz), opt_(opt), files_(files), level_(level), plan_(plan), out_(out), progress_(p), total_(total) {
     if (opt_.keepTriangles) {
       out_.trianglePath = joinPath(opt_.scratchDir, "triangles.bin");
       tri_ = std::fopen(out_.trianglePath.c_str(), "wb");
@@ -250,12 +368,10 @@ class DistributeSink : public BatchSink {
     if (tri_) std::fclose(tri_);
   }
   Status onPoints(const PointBatch& b) override {
-    const int shift = 32 - level_;
     for (size_t i = 0; i < b.size(); ++i) {
       if (!finite3(b.x[i], b.y[i], b.z[i])) continue;
       ChunkPoint p{};
-      const double rel[3] = {b.x[i] - opt_.origin.x(), b.y[i] - opt_.origin.y(), b.z[i] - opt_.origin.z()};
-      for (int a = 0; a < 3; ++a) p.q[a] = qz_.encode(rel[a], a);
+      quantize(b, i, qz_, opt_.origin, p.q);
       if (b.hasNormals()) {
         p.n[0] = b.nx[i]; p.n[1] = b.ny[i]; p.n[2] = b.nz[i];
         p.flags |= kChunkHasNormal;
@@ -267,14 +383,13 @@ class DistributeSink : public BatchSink {
         if (out_.vertexPos.size() < 3 * (size_t(p.vid) + 1)) {
           out_.vertexPos.resize(3 * (size_t(p.vid) + 1), 0.0);
         }
+        const double rel[3] = {b.x[i] - opt_.origin.x(), b.y[i] - opt_.origin.y(), b.z[i] - opt_.origin.z()};
         for (int a = 0; a < 3; ++a) out_.vertexPos[3 * size_t(p.vid) + a] = rel[a];
       }
-      const uint32_t ix = level_ ? p.q[0] >> shift : 0, iy = level_ ? p.q[1] >> shift : 0,
-                     iz = level_ ? p.q[2] >> shift : 0;
-      SA_RETURN_IF_ERROR(files_.add(keyOf(ix, iy, iz, level_), p));
+      SA_RETURN_IF_ERROR(files_.add(nodeOf(p.q), p));
     }
     seen_ += b.size();
-    if (progress_) progress_("distribute", seen_, total_);
+    if (progress_) progress_("distribute", plan_ ? total_ / 2 + seen_ / 2 : seen_, total_);
     return Status::ok();
   }
   Status onTriangles(const uint32_t* idx, size_t n) override {
@@ -298,10 +413,13 @@ class DistributeSink : public BatchSink {
   }
 
  private:
+  // The chunk node a point goes to: the plan's chunk holding it, else its node at the start level.
+  uint64_t nodeOf(const uint32_t q[3]) const { return plan_ ? plan_->nodeOf(q) : nodeId(level_, keyAt(q, level_)); }
   const Quantizer& qz_;
   const DistributeOptions& opt_;
   ChunkFiles& files_;
   int level_;
+  const ChunkPlan* plan_;
   DistributeResult& out_;
   // The octree is built from points, so a triangle much larger than its neighbours (the flat
   // base of a scanned bust) would have no cell where none of its vertices lies: such triangles
@@ -319,7 +437,6 @@ class DistributeSink : public BatchSink {
     std::nth_element(tmp.begin(), tmp.begin() + long(tmp.size() / 2), tmp.end());
     const double median = tmp[tmp.size() / 2];
     if (!(median > 0)) return Status::ok();
-    const int shift = 32 - level_;
     for (size_t t = 0; t < n; ++t) {
       const uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
       if (3 * size_t(std::max({a, b, c})) + 2 >= P.size()) continue;
@@ -346,9 +463,7 @@ class DistributeSink : public BatchSink {
           }
           p.flags = kChunkHasNormal | kChunkSurfaceSample;
           p.vid = static_cast<uint32_t>(triBase_ + t);
-          const uint32_t ix = level_ ? p.q[0] >> shift : 0, iy = level_ ? p.q[1] >> shift : 0,
-                         iz = level_ ? p.q[2] >> shift : 0;
-          SA_RETURN_IF_ERROR(files_.add(keyOf(ix, iy, iz, level_), p));
+          SA_RETURN_IF_ERROR(files_.add(nodeOf(p.q), p));
           ++out_.surfaceSamples;
         }
     }
@@ -367,7 +482,7 @@ class DistributeSink : public BatchSink {
 // Streams an over-full chunk file into its eight children.
 Status splitChunk(const ChunkInfo& c, const std::string& dir, std::vector<ChunkInfo>& children) {
   const int level = c.level + 1;
-  ChunkFiles files(dir, level);
+  ChunkFiles files(dir);
   std::FILE* f = std::fopen(c.path.c_str(), "rb");
   if (!f) return Status::internal(c.path + ": cannot reopen chunk file");
   std::vector<ChunkPoint> buf;
@@ -379,24 +494,14 @@ Status splitChunk(const ChunkInfo& c, const std::string& dir, std::vector<ChunkI
     if (!st.isOk() || !*more) break;
     for (size_t i = 0; i < buf.size() && st.isOk(); ++i) {
       const ChunkPoint& p = buf[i];
-      st = files.add(keyOf(p.q[0] >> shift, p.q[1] >> shift, p.q[2] >> shift, level), p);
+      st = files.add(nodeId(level, keyOf(p.q[0] >> shift, p.q[1] >> shift, p.q[2] >> shift, level)), p);
     }
   }
   std::fclose(f);
   SA_RETURN_IF_ERROR(st);
   SA_RETURN_IF_ERROR(files.flushAll());
   std::remove(c.path.c_str());
-  const uint64_t mask = (uint64_t(1) << level) - 1;
-  files.forEach([&](uint64_t key, uint64_t count) {
-    ChunkInfo ch;
-    ch.path = files.pathOf(key);
-    ch.count = count;
-    ch.level = level;
-    ch.ix = uint32_t((key >> (2 * level)) & mask);
-    ch.iy = uint32_t((key >> level) & mask);
-    ch.iz = uint32_t(key & mask);
-    children.push_back(ch);
-  });
+  files.forEach([&](uint64_t id, uint64_t count) { children.push_back(chunkInfoOf(files.pathOf(id), id, count)); });
   return Status::ok();
 }
 
@@ -419,24 +524,33 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
   int level = 0;
   const uint64_t n = input.pointCount();
   while (level < 3 && (n >> (3 * level)) > opt.maxPointsPerChunk) ++level;
-  ChunkFiles files(opt.scratchDir, level);
+  // A mesh's surface samples appear while it streams: no plan for meshes.
+  std::unique_ptr<ChunkPlan> plan;
+  const int planLevel = std::min(kPlanLevel, opt.maxChunkLevel);
+  if (opt.plan && !opt.keepTriangles && n > opt.maxPointsPerChunk && planLevel > level) {
+    HistogramSink hist(qz, opt.origin, planLevel, progress, n);
+    SA_RETURN_IF_ERROR(input.stream(hist, false));
+    plan = std::make_unique<ChunkPlan>(planChunks(std::move(hist.counts()), planLevel, level, opt));
+  }
+  ChunkFiles files(opt.scratchDir);
   {
-    DistributeSink sink(qz, opt, files, level, out, progress, n);
+    DistributeSink sink(qz, opt, files, level, plan.get(), out, progress, n);
     SA_RETURN_IF_ERROR(input.stream(sink, opt.keepTriangles));
   }
   SA_RETURN_IF_ERROR(files.flushAll());
+  // The split loop pops from the back: the planned chunks go in reversed, so that it meets them
+  // in the plan's order.
   std::vector<ChunkInfo> work;
-  const uint64_t mask = (uint64_t(1) << level) - 1;
-  files.forEach([&](uint64_t key, uint64_t count) {
-    ChunkInfo ch;
-    ch.path = files.pathOf(key);
-    ch.count = count;
-    ch.level = level;
-    ch.ix = uint32_t((key >> (2 * level)) & mask);
-    ch.iy = uint32_t((key >> level) & mask);
-    ch.iz = uint32_t(key & mask);
-    work.push_back(ch);
-  });
+  std::map<uint64_t, uint64_t> counts;
+  files.forEach([&](uint64_t id, uint64_t count) { counts[id] = count; });
+  if (plan) {
+    for (auto it = plan->leaves.rbegin(); it != plan->leaves.rend(); ++it)
+      if (counts.count(*it)) work.push_back(chunkInfoOf(files.pathOf(*it), *it, counts[*it]));
+    if (work.size() != counts.size())
+      return Status::badInput(input.files()[0].path + ": the input changed while it was packed (its points per region differ between two reads)");
+  } else {
+    for (const auto& [id, count] : counts) work.push_back(chunkInfoOf(files.pathOf(id), id, count));
+  }
   while (!work.empty()) {
     ChunkInfo c = work.back();
     work.pop_back();

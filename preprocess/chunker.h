@@ -87,6 +87,10 @@ struct DistributeOptions {
   std::string scratchDir;
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // pack origin (absolute)
   bool keepTriangles = false;                        // also write triangles.bin
+  // Point inputs that may fill more than one chunk: count the points per node in a first read,
+  // so that every point goes straight to its final chunk and no chunk file is split (the same
+  // chunks as splitting, in the same order).
+  bool plan = true;
 };
 
 struct DistributeResult {

@@ -404,6 +404,9 @@ void mergeChunkCells(PackJob& job, uint32_t ci, const ChunkCells& c) {
   job.sum.layeredCells += c.layered;
 }
 
+// Fraction bits a normal component keeps in the chunk files between passes A and B.
+constexpr int kChunkNormalBits = 15;
+
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
 Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, uint64_t before, uint64_t total,
                   ChunkCells& out) {
@@ -450,12 +453,14 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   buildOctree(pos.data(), nrm.data(), idx, cmin, csize, ch.level, op, oc, cone.empty() ? nullptr : cone.data());
   // Rewrite the chunk in cell order with its normals and (smoothed) positions, for pass B. A point
   // input's pass B needs neither the point's index in its file nor its scan: zeroed, their planes
-  // of the byte-shuffled frames compress to nothing (the triangle path keeps both).
+  // of the byte-shuffled frames compress to nothing (the triangle path keeps both). Normals are
+  // rounded to multiples of 2^-kChunkNormalBits (under 0.002 degree; the pack keeps 10 bits):
+  // their low mantissa bytes become zero and compress to nothing too.
   std::vector<ChunkPoint> sorted(n);
   for (size_t i = 0; i < n; ++i) {
     const size_t s = idx[i];
     sorted[i] = pts[s];
-    std::copy(&nrm[3 * s], &nrm[3 * s] + 3, sorted[i].n);
+    for (int a = 0; a < 3; ++a) sorted[i].n[a] = std::ldexp(std::nearbyint(std::ldexp(nrm[3 * s + a], kChunkNormalBits)), -kChunkNormalBits);
     for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
     if (!job.triangles) sorted[i].vid = sorted[i].scan = 0;
   }
@@ -1143,7 +1148,7 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 10;  // 10: point cells split past maxLeafPoints; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 10;  // 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,

@@ -7,8 +7,10 @@
 #include <cstring>
 #include <filesystem>
 #include <random>
+#include <set>
 
 #include "../common/test_util.h"
+#include "formats/source.h"
 #include "preprocess/chunker.h"
 
 namespace sa {
@@ -89,6 +91,64 @@ TEST(ChunkFile, DamagedOrMiscountedFilesAreErrorsNamingTheFile) {
     expectError(dir.file("huge.bin"), 10, "a frame header claiming 4 billion records");
   }
   expectError(dir.file("missing.bin"), 10, "missing file");
+}
+
+// Distributing with a plan (a counting read first) ends with the chunks that splitting over-full
+// chunk files ends with: the same nodes, counts, order and records, each record written once.
+TEST(Distribute, PlannedChunksAreTheSplitChunksWrittenOnce) {
+  test::TempDir dir;
+  // A dense patch in one corner and a sparse sheet: nodes over-full at different levels.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 60000; ++i) pts.emplace_back(0.2 * u(rng), 0.2 * u(rng), 0.01 * u(rng));
+  for (int i = 0; i < 20000; ++i) pts.emplace_back(u(rng), u(rng), 0.05 * u(rng));
+  test::writePointsPly(dir.file("p.ply"), pts, nullptr);
+  auto in = InputSet::open({dir.file("p.ply")});
+  ASSERT_TRUE(in.isOk());
+  BoundsInfo b;
+  ASSERT_TRUE(computeBounds(*in, b, nullptr, false, false).isOk());
+  Quantizer qz;
+  qz.cubeSize = (b.max - b.min).maxCoeff() * 1.0001;
+  qz.cubeMin = Eigen::Vector3d::Constant(-qz.cubeSize / 2);
+  std::vector<ChunkInfo> chunks[2];
+  uint64_t records[2];
+  for (int planned = 0; planned < 2; ++planned) {
+    DistributeOptions o;
+    o.maxPointsPerChunk = 3000;
+    o.origin = (b.min + b.max) / 2;
+    o.plan = planned;
+    std::filesystem::create_directory(dir.file(planned ? "plan" : "split"));
+    o.scratchDir = dir.file(planned ? "plan" : "split");
+    DistributeResult r;
+    const uint64_t before = chunkRecordBytesWritten();
+    ASSERT_TRUE(distributePoints(*in, qz, o, r, nullptr).isOk());
+    records[planned] = (chunkRecordBytesWritten() - before) / sizeof(ChunkPoint);
+    chunks[planned] = r.chunks;
+  }
+  std::printf("[distribute] %zu chunks; records written: split %llu, planned %llu for %zu points\n", chunks[1].size(),
+              (unsigned long long)records[0], (unsigned long long)records[1], pts.size());
+  EXPECT_EQ(records[1], pts.size()) << "every record written once";
+  EXPECT_GT(records[0], pts.size()) << "splitting rewrites the over-full chunks' records";
+  ASSERT_EQ(chunks[0].size(), chunks[1].size());
+  EXPECT_GT(chunks[1].size(), 10u);
+  std::set<int> levels;
+  for (size_t i = 0; i < chunks[1].size(); ++i) {
+    const ChunkInfo &s = chunks[0][i], &p = chunks[1][i];
+    EXPECT_EQ(s.level, p.level);
+    EXPECT_EQ(s.ix, p.ix);
+    EXPECT_EQ(s.iy, p.iy);
+    EXPECT_EQ(s.iz, p.iz);
+    EXPECT_EQ(s.count, p.count);
+    EXPECT_LE(p.count, 3000u);
+    levels.insert(p.level);
+    std::vector<ChunkPoint> a, c;
+    ASSERT_TRUE(loadChunk(s, a).isOk());
+    ASSERT_TRUE(loadChunk(p, c).isOk());
+    ASSERT_EQ(a.size(), c.size());
+    EXPECT_EQ(std::memcmp(a.data(), c.data(), a.size() * sizeof(ChunkPoint)), 0) << "chunk " << i;
+  }
+  EXPECT_GE(levels.size(), 2u) << "chunks at several levels";
 }
 
 }  // namespace
