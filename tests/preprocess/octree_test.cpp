@@ -35,16 +35,22 @@ bool finiteFit(const PlaneFit& f) {
          std::abs(f.w.norm() - 1) < 1e-9 && std::abs(f.u.dot(f.w)) < 1e-9 && std::abs(f.v.dot(f.w)) < 1e-9;
 }
 
-TEST(Octree, TiltedPlaneIsOneCell) {
+// 20000 random points of the plane through the origin with normal n, their normals n.
+Cloud tiltedPlane(const Eigen::Vector3d& n, unsigned seed) {
   Cloud c;
-  std::mt19937 rng(1);
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<double> U(-0.9, 0.9);
-  const Eigen::Vector3d n = Eigen::Vector3d(0.3, 0.2, 1).normalized();
   for (int i = 0; i < 20000; ++i) {
     Eigen::Vector3d p(U(rng), U(rng), 0);
     p.z() = -(n.x() * p.x() + n.y() * p.y()) / n.z();
     c.add(p, n);
   }
+  return c;
+}
+
+TEST(Octree, TiltedPlaneIsOneCell) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, 0.2, 1).normalized();
+  const Cloud c = tiltedPlane(n, 1);
   auto cells = build(c);
   ASSERT_EQ(cells.size(), 1u);
   EXPECT_TRUE(cells[0].fit.heightField);
@@ -55,15 +61,7 @@ TEST(Octree, TiltedPlaneIsOneCell) {
 // maxLeafPoints bounds a tile's memory: a plane that is one height field is split until no
 // cell holds more points, and every piece is still a height field.
 TEST(Octree, HeightFieldsLargerThanMaxLeafPointsAreSplit) {
-  Cloud c;
-  std::mt19937 rng(2);
-  std::uniform_real_distribution<double> U(-0.9, 0.9);
-  const Eigen::Vector3d n = Eigen::Vector3d(0.3, 0.2, 1).normalized();
-  for (int i = 0; i < 20000; ++i) {
-    Eigen::Vector3d p(U(rng), U(rng), 0);
-    p.z() = -(n.x() * p.x() + n.y() * p.y()) / n.z();
-    c.add(p, n);
-  }
+  const Cloud c = tiltedPlane(Eigen::Vector3d(0.3, 0.2, 1).normalized(), 2);
   OctreeParams p;
   p.maxLeafPoints = 3000;
   const auto cells = build(c, p);
