@@ -981,6 +981,19 @@ class ByteGate {
     }
     free_.notify_all();
   }
+  // Bytes held for one piece of work: given back when it ends, by an exception too (a thread
+  // that never gave them back would leave the others waiting for ever).
+  class Held {
+   public:
+    Held(ByteGate& gate, uint64_t bytes) : gate_(gate), bytes_(bytes) { gate_.take(bytes_); }
+    ~Held() { gate_.give(bytes_); }
+    Held(const Held&) = delete;
+    Held& operator=(const Held&) = delete;
+
+   private:
+    ByteGate& gate_;
+    const uint64_t bytes_;
+  };
 
  private:
   std::mutex mu_;
@@ -1003,6 +1016,25 @@ uint64_t tileBudget(const PackJob& job, size_t points) {
   return std::max(job.opt.memBudget / 4, job.opt.memBudget > chunk ? job.opt.memBudget - chunk : 0);
 }
 
+// The texel grid of a cell's tile: its box and frame.
+TileGrid tileGrid(const CellRecord& r) {
+  TileGrid g;
+  g.width = r.tileW;
+  g.height = r.tileH;
+  g.u0 = r.box[0];
+  g.v0 = r.box[2];
+  g.du = (r.box[1] - r.box[0]) / r.tileW;
+  g.dv = (r.box[3] - r.box[2]) / r.tileH;
+  g.wMin = r.box[4];
+  g.wMax = r.box[5];
+  for (int a = 0; a < 3; ++a) {
+    g.frame[a] = r.u[a];
+    g.frame[3 + a] = r.v[a];
+    g.frame[6 + a] = r.w[a];
+  }
+  return g;
+}
+
 // ---- pass B, one chunk: every cell's tile ----
 Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer, ChunkTicker& ticker) {
   std::vector<ChunkPoint> pts;
@@ -1019,38 +1051,29 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
   std::mutex failMu;
   const Precision precision = effectivePrecision(job.opt, job.triangles);
   ByteGate gate(tileBudget(job, pts.size()));
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
+  // One cell's tile made and written; its working memory is gone when it returns.
+  auto makeTile = [&](uint32_t id) {
+    CellRecord& r = job.records[id];
+    TileGrid g = tileGrid(r);
     TileOutput tile;
+    if (job.triangles) {
+      auto it = cellTris.find(id);
+      triangleTile(job, it == cellTris.end() ? nullptr : &it->second, r, writer, id, g, tile);
+    } else {
+      pointTile(job, job.cells[id], r, pts, pos, margins, withColor, writer, id, g, tile);
+    }
+    reducePrecision(precision, g, tile);
+    return writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
+                            withColor ? tile.rgba.data() : nullptr);
+  };
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
     for (size_t m = rr.begin(); m < rr.end(); ++m) {
       const uint32_t id = mine[m];
-      const uint64_t bytes = tileBytes(job, id);
-      gate.take(bytes);
-      CellRecord& r = job.records[id];
-      TileGrid g;
-      g.width = r.tileW;
-      g.height = r.tileH;
-      g.u0 = r.box[0];
-      g.v0 = r.box[2];
-      g.du = (r.box[1] - r.box[0]) / r.tileW;
-      g.dv = (r.box[3] - r.box[2]) / r.tileH;
-      g.wMin = r.box[4];
-      g.wMax = r.box[5];
-      for (int a = 0; a < 3; ++a) {
-        g.frame[a] = r.u[a];
-        g.frame[3 + a] = r.v[a];
-        g.frame[6 + a] = r.w[a];
+      Status s;
+      {
+        const ByteGate::Held held(gate, tileBytes(job, id));
+        s = makeTile(id);
       }
-      if (job.triangles) {
-        auto it = cellTris.find(id);
-        triangleTile(job, it == cellTris.end() ? nullptr : &it->second, r, writer, id, g, tile);
-      } else {
-        pointTile(job, job.cells[id], r, pts, pos, margins, withColor, writer, id, g, tile);
-      }
-      reducePrecision(precision, g, tile);
-      Status s = writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
-                                  withColor ? tile.rgba.data() : nullptr);
-      tile = TileOutput{};  // its pages go with the bytes given back
-      gate.give(bytes);
       ticker.add(job.cells[id].count);
       if (!s) {
         std::lock_guard<std::mutex> lock(failMu);
