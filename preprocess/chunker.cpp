@@ -8,6 +8,7 @@
 #include <cstring>
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <map>
 #include <memory>
 
@@ -20,8 +21,9 @@ namespace {
 
 // ---- chunk files: frames of compressed records ----
 // A chunk file is a sequence of frames: u32 record count (1..kMaxFrameRecords), u32 compressed
-// bytes, then the records byte-shuffled (byte b of every record together: positions, normals and
-// ids compress far better as planes) and zstd-compressed at level 1. Packing writes and rereads
+// bytes, u32 position shifts, then the records with their positions as differences
+// (deltaPositions), byte-shuffled (byte b of every record together: positions, normals and ids
+// compress far better as planes) and zstd-compressed at level 1. Packing writes and rereads
 // every point two or three times; raw 36-byte records made the temporary files twice the input.
 constexpr uint32_t kMaxFrameRecords = 1u << 16;
 std::atomic<uint64_t> gScratchBytes{0}, gScratchRaw{0};
@@ -73,20 +75,56 @@ void unshuffleRecords(const uint8_t* planes, size_t m, uint8_t* dst) {
     for (size_t b = 0; b < kRec; ++b) dst[i * kRec + b] = planes[b * m + i];
 }
 
+// Positions as zigzagged differences from the record before (the frame's first from zero), per
+// axis, after shifting out the low bits every position of the frame has zero (`shift`, the
+// frame header's third word: pass A rounds a point chunk's positions to a step under its
+// sample spacing). Records in cell order, or in a scanner's order, lie close to the one before:
+// a difference's high bytes are then zero planes where the 32-bit positions' were noise.
+uint32_t zeroBits(const ChunkPoint* r, size_t m) {
+  uint32_t any[3] = {0, 0, 0}, shift = 0;
+  for (size_t i = 0; i < m; ++i)
+    for (int a = 0; a < 3; ++a) any[a] |= r[i].q[a];
+  for (int a = 0; a < 3; ++a) shift |= uint32_t(any[a] ? std::countr_zero(any[a]) : 0) << (8 * a);
+  return shift;
+}
+void deltaPositions(ChunkPoint* r, size_t m, uint32_t shift) {
+  uint32_t prev[3] = {0, 0, 0};
+  for (size_t i = 0; i < m; ++i)
+    for (int a = 0; a < 3; ++a) {
+      const uint32_t q = r[i].q[a] >> ((shift >> (8 * a)) & 31);
+      const uint32_t d = q - prev[a];
+      prev[a] = q;
+      r[i].q[a] = (d << 1) ^ (0u - (d >> 31));
+    }
+}
+void undeltaPositions(ChunkPoint* r, size_t m, uint32_t shift) {
+  uint32_t prev[3] = {0, 0, 0};
+  for (size_t i = 0; i < m; ++i)
+    for (int a = 0; a < 3; ++a) {
+      const uint32_t z = r[i].q[a];
+      prev[a] += (z >> 1) ^ (0u - (z & 1u));
+      r[i].q[a] = prev[a] << ((shift >> (8 * a)) & 31);
+    }
+}
+
 Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts, size_t n) {
   ZSTD_CCtx* cctx = zstd().c;
   thread_local std::vector<uint8_t> planes, packed;
+  thread_local std::vector<ChunkPoint> frame;
   for (size_t at = 0; at < n; at += kMaxFrameRecords) {
     const size_t m = std::min<size_t>(kMaxFrameRecords, n - at);
+    frame.assign(pts + at, pts + at + m);
+    const uint32_t shift = zeroBits(frame.data(), m);
+    deltaPositions(frame.data(), m, shift);
     planes.resize(m * kRec);
-    shuffleRecords(reinterpret_cast<const uint8_t*>(pts + at), m, planes.data());
+    shuffleRecords(reinterpret_cast<const uint8_t*>(frame.data()), m, planes.data());
     packed.resize(ZSTD_compressBound(planes.size()));
     const size_t c = ZSTD_compressCCtx(cctx, packed.data(), packed.size(), planes.data(), planes.size(), 1);
     if (ZSTD_isError(c)) return Status::internal(path + ": cannot compress a chunk frame: " + ZSTD_getErrorName(c));
-    const uint32_t head[2] = {uint32_t(m), uint32_t(c)};
-    if (std::fwrite(head, 4, 2, f) != 2 || std::fwrite(packed.data(), 1, c, f) != c)
+    const uint32_t head[3] = {uint32_t(m), uint32_t(c), shift};
+    if (std::fwrite(head, 4, 3, f) != 3 || std::fwrite(packed.data(), 1, c, f) != c)
       return Status::internal(path + ": short write (disk full?)");
-    gScratchBytes += 8 + c;
+    gScratchBytes += sizeof(head) + c;
     gScratchRaw += m * kRec;
   }
   return Status::ok();
@@ -97,10 +135,11 @@ Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts,
 Result<bool> readFrame(std::FILE* f, const std::string& path, std::vector<ChunkPoint>& out) {
   ZSTD_DCtx* dctx = zstd().d;
   thread_local std::vector<uint8_t> planes, packed;
-  uint32_t head[2];
-  const size_t got = std::fread(head, 4, 2, f);
+  uint32_t head[3];
+  const size_t got = std::fread(head, 4, 3, f);
   if (got == 0 && std::feof(f)) return false;
-  if (got != 2 || head[0] == 0 || head[0] > kMaxFrameRecords || head[1] > ZSTD_compressBound(size_t(head[0]) * kRec))
+  if (got != 3 || head[0] == 0 || head[0] > kMaxFrameRecords || head[1] > ZSTD_compressBound(size_t(head[0]) * kRec) ||
+      (head[2] & 0xe0e0e0e0u) != 0)
     return Status::internal(path + ": chunk file is damaged (a frame header out of range)");
   packed.resize(head[1]);
   if (std::fread(packed.data(), 1, head[1], f) != head[1]) return Status::internal(path + ": chunk file is truncated");
@@ -110,6 +149,7 @@ Result<bool> readFrame(std::FILE* f, const std::string& path, std::vector<ChunkP
   const size_t m = head[0];
   out.resize(m);
   unshuffleRecords(planes.data(), m, reinterpret_cast<uint8_t*>(out.data()));
+  undeltaPositions(out.data(), m, head[2]);
   return true;
 }
 

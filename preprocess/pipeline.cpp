@@ -407,6 +407,27 @@ void mergeChunkCells(PackJob& job, uint32_t ci, const ChunkCells& c) {
 // Fraction bits a normal component keeps in the chunk files between passes A and B.
 constexpr int kChunkNormalBits = 15;
 
+// Positions pass B reads of a point input keep 1/2^kChunkPositionBits of the chunk's sample
+// spacing (texels are about a spacing wide).
+constexpr int kChunkPositionBits = 10;
+
+// Rounds a point chunk's positions to multiples of the largest power-of-two step of the
+// quantizer's grid under spacing / 2^kChunkPositionBits, so that the low bits the chunk files
+// would otherwise carry as noise are zero (the frames shift them out). Returns the step's bits.
+int roundChunkPositions(const Quantizer& qz, double spacing, std::vector<double>& pos) {
+  const double unit = qz.cubeSize / 4294967296.0;
+  if (!(spacing > 0)) return 0;
+  const int bits = std::clamp(int(std::floor(std::log2(std::ldexp(spacing, -kChunkPositionBits) / unit))), 0, 24);
+  if (bits == 0) return 0;
+  const uint32_t half = 1u << (bits - 1), mask = ~((1u << bits) - 1);
+  for (size_t i = 0; i < pos.size(); ++i) {
+    const uint32_t q = qz.encode(pos[i], int(i % 3));
+    const uint32_t r = q >= mask ? (q & mask) : ((q + half) & mask);
+    pos[i] = qz.decode(r, int(i % 3));
+  }
+  return bits;
+}
+
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
 Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, uint64_t before, uint64_t total,
                   ChunkCells& out) {
@@ -456,6 +477,9 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   // of the byte-shuffled frames compress to nothing (the triangle path keeps both). Normals are
   // rounded to multiples of 2^-kChunkNormalBits (under 0.002 degree; the pack keeps 10 bits):
   // their low mantissa bytes become zero and compress to nothing too.
+  // A point input's positions are rounded first (roundChunkPositions), so that the cells' extents
+  // hold what pass B reads.
+  if (!job.triangles) roundChunkPositions(job.qz, sp, pos);
   std::vector<ChunkPoint> sorted(n);
   for (size_t i = 0; i < n; ++i) {
     const size_t s = idx[i];
@@ -1171,7 +1195,7 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 10;  // 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 11;  // 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
