@@ -216,7 +216,7 @@ Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, c
     std::vector<uint8_t> blob;
     {
       const std::vector<uint8_t> t = withGutter(src[l], c.tileW, c.tileH, size_t(layouts[l].texelBytes()));
-      blob = encodeTile(t.data(), whole.w, whole, layouts[l]);
+      blob = encodeTile(t.data(), whole.w, whole, layouts[l], level_);
     }
     const uint64_t at = blobEnd_.fetch_add(blob.size());
     SA_RETURN_IF_ERROR(file_.pwriteAll(blob.data(), blob.size(), at));

@@ -60,7 +60,11 @@ class PackWriter {
     meta_.cellCount = cells;
   }
   // Compressed pages (FORMAT.md): HGTZ, NRMZ, COLZ instead of HGHT, NRML, COLR. Before open().
-  void setCompressPages(bool on) { compress_ = on; }
+  // level: zstd's for the coded tiles (kDefaultTileLevel).
+  void setCompressPages(bool on, int level = kDefaultTileLevel) {
+    compress_ = on;
+    level_ = level;
+  }
   // Computes checksums, writes header, META and CELL, fsyncs and renames into place (with
   // compressed pages: the final file from the coded tiles, in cell order, and the temporaries
   // removed).
@@ -87,6 +91,7 @@ class PackWriter {
   std::vector<CellRecord> cells_;
   std::string note_;
   bool compress_ = false;
+  int level_ = kDefaultTileLevel;
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
   std::atomic<uint64_t> blobEnd_{0};
   std::vector<CellBlobs> blobs_;

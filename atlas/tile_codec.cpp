@@ -8,8 +8,6 @@
 namespace sa {
 namespace {
 
-constexpr int kZstdLevel = 1;
-
 // LOCO-I's median edge detector: a left, b up, c up-left.
 inline uint32_t predict(uint32_t a, uint32_t b, uint32_t c) {
   if (c >= std::max(a, b)) return std::min(a, b);
@@ -77,9 +75,9 @@ void applyPlanes(const uint8_t* planes, uint8_t* page, uint32_t pageWidth, TileR
   }
 }
 
-std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, size_t skip = 0) {
+std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, int level, size_t skip = 0) {
   std::vector<uint8_t> out(skip + ZSTD_compressBound(bytes.size()));
-  const size_t z = ZSTD_compress(out.data() + skip, out.size() - skip, bytes.data(), bytes.size(), kZstdLevel);
+  const size_t z = ZSTD_compress(out.data() + skip, out.size() - skip, bytes.data(), bytes.size(), level);
   out.resize(ZSTD_isError(z) ? 0 : skip + z);  // cannot fail: the bound holds
   return out;
 }
@@ -197,7 +195,7 @@ void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g)
 // The pyramid blob of region r (empty for a tile too small for a level or a gutter that does
 // not repeat the tile): the coverage mask, the coarsest level's residual planes, then each finer
 // level's other texels against their rebuild from the level above.
-std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
+std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level) {
   if (r.w < 3 || r.h < 3) return {};
   const size_t tb = size_t(layout.texelBytes());
   const std::vector<uint8_t> in = interiorOf(page, pageWidth, r, tb);
@@ -219,7 +217,7 @@ std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, Tile
     LevelGrids g = levelOf(in.data(), cov.data(), iw, lv[l], layout);
     encodeOdd(g, lv[l], layout, payload);
   }
-  std::vector<uint8_t> out = compress(payload, sizeof kPyramidTag);
+  std::vector<uint8_t> out = compress(payload, level, sizeof kPyramidTag);
   std::copy(std::begin(kPyramidTag), std::end(kPyramidTag), out.begin());
   return out;
 }
@@ -335,10 +333,10 @@ size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32
   return snapped;
 }
 
-std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
-  std::vector<uint8_t> full = compress(residualPlanes(page, pageWidth, r, layout));
+std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level) {
+  std::vector<uint8_t> full = compress(residualPlanes(page, pageWidth, r, layout), level);
   if (layout.comps == 1) return full;  // heights: LOCO-I alone was as small on the 2 M-point survey
-  std::vector<uint8_t> pyramid = encodePyramid(page, pageWidth, r, layout);
+  std::vector<uint8_t> pyramid = encodePyramid(page, pageWidth, r, layout, level);
   return !pyramid.empty() && pyramid.size() < full.size() ? pyramid : full;
 }
 

@@ -54,8 +54,15 @@ struct TileRegion {
 size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout,
                      const std::function<bool(const uint8_t*, const uint8_t*)>& close);
 
-// Codes region r of `page` (row-major, pageWidth texels per row).
-std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout);
+// zstd's level for the coded tiles, unless the writer is told otherwise (pack --zstd-level): on
+// the 2 M-point survey 6 gave 5.4 % fewer bytes than 1 for 8.5 % more packing time; decoding
+// costs the same at any level.
+inline constexpr int kDefaultTileLevel = 6;
+inline constexpr int kMaxTileLevel = 19;
+
+// Codes region r of `page` (row-major, pageWidth texels per row) at zstd level `level`.
+std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout,
+                                int level = kDefaultTileLevel);
 // Decodes `blob` into region r of `page`; an error when the blob is not a tile of that size.
 Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout);
 

@@ -86,6 +86,9 @@ const char* kHelp =
     "  --raw-pages            store the atlas pages uncompressed (larger; mapped in place, no decoding\n"
     "                         when opened). Default: each tile coded losslessly (prediction + zstd)\n"
     "                         after the precision below is applied\n"
+    "  --zstd-level N         zstd level of the coded tiles, 1..19 (default 6; 1 packs the 2 M-point\n"
+    "                         survey 8 % faster and 5 % larger, 9 is 2 % smaller and slower still;\n"
+    "                         decoding costs the same at any level)\n"
     "  --height-step T        heights rounded to steps of at most T texels; a height moves by half\n"
     "                         a step at most (default 1/16 for points, whose heights are averages\n"
     "                         of noisy samples; 0, all 16 bits of the code kept, for meshes)\n"
@@ -234,6 +237,13 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
   opt.force = a.flag("force");
   opt.reproducible = a.flag("reproducible");
   opt.compressPages = !a.flag("raw-pages");
+  if (a.has("zstd-level")) {
+    auto v = parseNumber("zstd-level", a.get("zstd-level"));
+    if (!v) return v.status();
+    if (!(*v >= 1 && *v <= kMaxTileLevel && *v == std::floor(*v)))
+      return Status::badInput("--zstd-level must be a whole number from 1 to " + std::to_string(kMaxTileLevel));
+    opt.pageLevel = int(*v);
+  }
   SA_RETURN_IF_ERROR(parsePrecision(a, opt));
   opt.scratchParent = a.get("scratch");
   return Status::ok();
@@ -304,7 +314,7 @@ int cmdPack(int argc, char** argv) {
   Status s = a.parse(argc, argv,
                      {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
                       "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves",
-                      "height-step", "normal-tolerance", "colour-tolerance"},
+                      "height-step", "normal-tolerance", "colour-tolerance", "zstd-level"},
                      {"as-points", "strict", "force", "no-smooth", "reproducible", "raw-pages", "lossless", "json", "quiet", "help"},
                      {{"o", "output"}, {"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include "atlas/tile_codec.h"
 #include "formats/source.h"
 #include "preprocess/chunker.h"
 #include "preprocess/octree.h"
@@ -37,6 +38,7 @@ struct PackOptions {
   bool force = false;             // repack even when the output is up to date
   bool reproducible = false;      // no timings in META: the same input and options give the same bytes
   bool compressPages = true;      // pages coded losslessly per tile (HGTZ, NRMZ, COLZ) instead of raw
+  int pageLevel = kDefaultTileLevel;  // zstd level of the coded tiles (1..kMaxTileLevel)
   // What the pages keep (FORMAT.md, "Precision"): heights rounded to steps of at most this many
   // texels (0: every bit of the 16-bit code); normals and colours set to the page coder's
   // pyramid rebuild where that moves them by at most these degrees and grey levels (0: kept).

@@ -737,6 +737,32 @@ TEST(Cli, PackReportsItsTemporariesAndLeavesNone) {
   EXPECT_EQ(run("verify " + d.file("z.hfa")).code, 0);
 }
 
+// --zstd-level changes how hard the tiles are compressed, not what they hold: the default (6)
+// is smaller than 1 and draws the same image; a level out of range is refused, nothing written.
+TEST(Cli, ZstdLevelChangesTheBytesNotThePages) {
+  test::TempDir d;
+  const std::string las = test::sharedData("lidar/autzen_trim.las");
+  CmdResult fast = run("pack " + las + " -o " + d.file("fast.hfa") + " --zstd-level 1 --reproducible --json");
+  CmdResult dflt = run("pack " + las + " -o " + d.file("dflt.hfa") + " --reproducible --json");
+  ASSERT_EQ(fast.code, 0);
+  ASSERT_EQ(dflt.code, 0);
+  const double fastBytes = nlohmann::json::parse(fast.out)["bytes"].get<double>();
+  const double dfltBytes = nlohmann::json::parse(dflt.out)["bytes"].get<double>();
+  std::printf("autzen: %.0f bytes at --zstd-level 1, %.0f at the default\n", fastBytes, dfltBytes);
+  EXPECT_LT(dfltBytes, fastBytes);
+  EXPECT_EQ(run("verify " + d.file("fast.hfa")).code, 0);
+  EXPECT_EQ(run("verify " + d.file("dflt.hfa")).code, 0);
+  ASSERT_EQ(run("render " + d.file("fast.hfa") + " --orbit 1 --size 128x128 -o " + d.file("f.png")).code, 0);
+  ASSERT_EQ(run("render " + d.file("dflt.hfa") + " --orbit 1 --size 128x128 -o " + d.file("d.png")).code, 0);
+  EXPECT_EQ(bytesOf(d.file("f.png")), bytesOf(d.file("d.png")));
+  for (const char* bad : {"0", "20", "2.5", "fast"}) {
+    const CmdResult r = runErr("pack " + las + " -o " + d.file("bad.hfa") + " --zstd-level " + bad, d.file("err.txt"));
+    EXPECT_EQ(r.code, 2) << bad;
+    EXPECT_NE(r.err.find("--zstd-level"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(d.file("bad.hfa"))) << bad;
+  }
+}
+
 TEST(Cli, InfoSaysWhenATexelCapLoweredTheResolution) {
   test::TempDir d;
   const std::string bunny = test::sharedData("stanford_bunny/reconstruction/bun_zipper.ply");
