@@ -94,7 +94,7 @@ const char* kHelp =
     "                         of noisy samples; 0, all 16 bits of the code kept, for meshes)\n"
     "  --normal-tolerance DEG a stored normal may move by up to DEG degrees to what the coarser\n"
     "                         texels around it predict, which the page coder then stores as\n"
-    "                         nothing (default 1 for points; 0, every normal kept, for meshes)\n"
+    "                         nothing (default 1.5 for points; 0, every normal kept, for meshes)\n"
     "  --colour-tolerance L   the same for colours, in grey levels per channel (default 4; 0 keeps)\n"
     "  --lossless             --height-step 0 --normal-tolerance 0 --colour-tolerance 0: the pages\n"
     "                         hold the heights, normals and colours as computed (larger)\n"

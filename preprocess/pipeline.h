@@ -16,13 +16,15 @@
 namespace sa {
 
 // The default precision: a point cloud's heights and normals are averages of noisy samples,
-// whose noise is far above 1/32 texel and about a degree from texel to texel; a mesh's are
+// whose noise is far above 1/32 texel and a degree or more from texel to texel (1.5 degrees of
+// snapping left the bunny and dragon scans' normals closer to the reference meshes than 1 and
+// 0: BENCHMARKS.md, "Temporary disk and pack bytes"); a mesh's are
 // exact, and kept: the accuracy tests hold its heights to 1e-5 of the model's size (1/16 texel
 // steps: Igea 1.34e-5), a degree of normal snapping shows along its cells' borders (Igea's seam
 // ratio 2.65 -> 2.79), and where a mesh has no normals its shading is the height gradient's
 // (even 1/256 texel steps: the bust's close-up seam ratio 1.72 -> 1.79, bar 1.8).
 inline constexpr double kPointHeightStep = 1.0 / 16, kMeshHeightStep = 0;
-inline constexpr double kPointNormalTolerance = 1, kMeshNormalTolerance = 0;
+inline constexpr double kPointNormalTolerance = 1.5, kMeshNormalTolerance = 0;
 
 struct PackOptions {
   uint64_t memBudget = uint64_t(1) << 30;     // bytes
