@@ -413,19 +413,18 @@ constexpr int kChunkPositionBits = 10;
 
 // Rounds a point chunk's positions to multiples of the largest power-of-two step of the
 // quantizer's grid under spacing / 2^kChunkPositionBits, so that the low bits the chunk files
-// would otherwise carry as noise are zero (the frames shift them out). Returns the step's bits.
-int roundChunkPositions(const Quantizer& qz, double spacing, std::vector<double>& pos) {
+// would otherwise carry as noise are zero (the frames shift them out).
+void roundChunkPositions(const Quantizer& qz, double spacing, std::vector<double>& pos) {
+  if (!(spacing > 0)) return;
   const double unit = qz.cubeSize / 4294967296.0;
-  if (!(spacing > 0)) return 0;
   const int bits = std::clamp(int(std::floor(std::log2(std::ldexp(spacing, -kChunkPositionBits) / unit))), 0, 24);
-  if (bits == 0) return 0;
+  if (bits == 0) return;
   const uint32_t half = 1u << (bits - 1), mask = ~((1u << bits) - 1);
   for (size_t i = 0; i < pos.size(); ++i) {
     const uint32_t q = qz.encode(pos[i], int(i % 3));
     const uint32_t r = q >= mask ? (q & mask) : ((q + half) & mask);
     pos[i] = qz.decode(r, int(i % 3));
   }
-  return bits;
 }
 
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
