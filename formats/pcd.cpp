@@ -213,18 +213,79 @@ class Mapping {
 
 }  // namespace
 
-Result<PcdHeader> readPcdHeader(const std::string& path) {
-  BufferedReader in;
-  SA_RETURN_IF_ERROR(in.open(path, 1 << 16));
+namespace {
+
+// The header's keyword lines as they are read (what has been seen decides the defaults).
+struct HeaderLines {
   PcdHeader h;
+  bool data = false, width = false, height = false, points = false, size = false, type = false;
+};
+
+// One SIZE, TYPE or COUNT entry into field f, or what is wrong with it.
+std::string fieldEntry(const std::string& key, const std::string& t, PcdField& f) {
+  uint64_t v = 0;
+  if (key == "SIZE") {
+    if (!parseU64(t, v) || (v != 1 && v != 2 && v != 4 && v != 8))
+      return "SIZE of field '" + f.name + "' is '" + t + "' (expected 1, 2, 4 or 8)";
+    f.size = int(v);
+  } else if (key == "TYPE") {
+    if (t.size() != 1 || (t[0] != 'I' && t[0] != 'U' && t[0] != 'F')) return "TYPE of field '" + f.name + "' is '" + t + "' (expected I, U or F)";
+    f.type = t[0];
+  } else {
+    if (!parseU64(t, v) || v < 1 || v > kMaxCount)
+      return "COUNT of field '" + f.name + "' is '" + t + "' (expected 1 to " + std::to_string(kMaxCount) + ")";
+    f.count = uint32_t(v);
+  }
+  return {};
+}
+
+// One header line's words (w[0] the keyword) into `hl`: "" when understood, else what is wrong
+// ("?" for a keyword this format does not have).
+std::string headerLine(const std::vector<std::string>& w, HeaderLines& hl) {
+  PcdHeader& h = hl.h;
+  const std::string& key = w[0];
+  const size_t n = w.size() - 1;
+  if (key == "VERSION") return {};
+  if (key == "FIELDS" || key == "COLUMNS") {
+    if (n == 0 || n > kMaxFields) return "FIELDS must name 1 to " + std::to_string(kMaxFields) + " fields";
+    h.fields.clear();
+    for (size_t i = 1; i < w.size(); ++i) h.fields.push_back(PcdField{w[i], 4, 'F', 1, 0});
+    return {};
+  }
+  if (key == "SIZE" || key == "TYPE" || key == "COUNT") {
+    if (h.fields.empty()) return key + " before FIELDS";
+    if (n != h.fields.size()) return key + " has " + std::to_string(n) + " entries but FIELDS names " + std::to_string(h.fields.size());
+    for (size_t i = 0; i < n; ++i)
+      if (std::string e = fieldEntry(key, w[i + 1], h.fields[i]); !e.empty()) return e;
+    hl.size |= key == "SIZE";
+    hl.type |= key == "TYPE";
+    return {};
+  }
+  if (key == "WIDTH" || key == "HEIGHT" || key == "POINTS") {
+    uint64_t v = 0;
+    if (n != 1 || !parseU64(w[1], v)) return key + " must be one non-negative integer";
+    if (key == "WIDTH") h.width = v, hl.width = true;
+    else if (key == "HEIGHT") h.height = v, hl.height = true;
+    else h.points = v, hl.points = true;
+    return {};
+  }
+  if (key == "VIEWPOINT") return n == 7 ? std::string() : "VIEWPOINT needs 7 numbers (tx ty tz qw qx qy qz)";
+  if (key == "DATA") {
+    if (n != 1) return "DATA needs one word (ascii, binary or binary_compressed)";
+    if (w[1] == "ascii") h.encoding = PcdEncoding::kAscii;
+    else if (w[1] == "binary") h.encoding = PcdEncoding::kBinary;
+    else if (w[1] == "binary_compressed") h.encoding = PcdEncoding::kBinaryCompressed;
+    else return "unknown DATA encoding '" + w[1] + "' (ascii, binary or binary_compressed)";
+    hl.data = true;
+    return {};
+  }
+  return "?";
+}
+
+// The header's lines up to and including DATA.
+Status readHeaderLines(const std::string& path, BufferedReader& in, HeaderLines& hl, int& lineNo) {
   std::string line;
-  int lineNo = 0;
-  bool haveData = false, haveWidth = false, haveHeight = false, havePoints = false, haveSize = false, haveType = false;
-  std::vector<int> sizes;
-  std::vector<char> types;
-  std::vector<uint32_t> counts;
-  auto bad = [&](const std::string& what) { return Status::badInput(path + ": line " + std::to_string(lineNo) + ": " + what); };
-  while (!haveData) {
+  while (!hl.data) {
     if (in.offset() > (1 << 20)) return Status::badInput(path + ": no DATA line in the first MiB (not a PCD file?)");
     if (!in.readLine(line, 1 << 16)) {
       if (lineNo == 0) return Status::badInput(path + ": empty file");
@@ -233,61 +294,21 @@ Result<PcdHeader> readPcdHeader(const std::string& path) {
     ++lineNo;
     const auto w = words(line);
     if (w.empty() || w[0][0] == '#') continue;
-    const std::string& key = w[0];
-    const size_t n = w.size() - 1;
-    if (key == "VERSION") continue;
-    if (key == "FIELDS" || key == "COLUMNS") {
-      if (n == 0 || n > kMaxFields) return bad("FIELDS must name 1 to " + std::to_string(kMaxFields) + " fields");
-      h.fields.clear();
-      for (size_t i = 1; i < w.size(); ++i) h.fields.push_back(PcdField{w[i], 4, 'F', 1, 0});
-    } else if (key == "SIZE" || key == "TYPE" || key == "COUNT") {
-      if (h.fields.empty()) return bad(key + " before FIELDS");
-      if (n != h.fields.size())
-        return bad(key + " has " + std::to_string(n) + " entries but FIELDS names " + std::to_string(h.fields.size()));
-      for (size_t i = 0; i < n; ++i) {
-        const std::string& t = w[i + 1];
-        uint64_t v = 0;
-        if (key == "SIZE") {
-          if (!parseU64(t, v) || (v != 1 && v != 2 && v != 4 && v != 8))
-            return bad("SIZE of field '" + h.fields[i].name + "' is '" + t + "' (expected 1, 2, 4 or 8)");
-          h.fields[i].size = int(v);
-        } else if (key == "TYPE") {
-          if (t.size() != 1 || (t[0] != 'I' && t[0] != 'U' && t[0] != 'F'))
-            return bad("TYPE of field '" + h.fields[i].name + "' is '" + t + "' (expected I, U or F)");
-          h.fields[i].type = t[0];
-        } else {
-          if (!parseU64(t, v) || v < 1 || v > kMaxCount)
-            return bad("COUNT of field '" + h.fields[i].name + "' is '" + t + "' (expected 1 to " + std::to_string(kMaxCount) + ")");
-          h.fields[i].count = uint32_t(v);
-        }
-      }
-      if (key == "SIZE") haveSize = true;
-      if (key == "TYPE") haveType = true;
-    } else if (key == "WIDTH" || key == "HEIGHT" || key == "POINTS") {
-      uint64_t v = 0;
-      if (n != 1 || !parseU64(w[1], v)) return bad(key + " must be one non-negative integer");
-      if (key == "WIDTH") { h.width = v; haveWidth = true; }
-      else if (key == "HEIGHT") { h.height = v; haveHeight = true; }
-      else { h.points = v; havePoints = true; }
-    } else if (key == "VIEWPOINT") {
-      if (n != 7) return bad("VIEWPOINT needs 7 numbers (tx ty tz qw qx qy qz)");
-    } else if (key == "DATA") {
-      if (n != 1) return bad("DATA needs one word (ascii, binary or binary_compressed)");
-      if (w[1] == "ascii") h.encoding = PcdEncoding::kAscii;
-      else if (w[1] == "binary") h.encoding = PcdEncoding::kBinary;
-      else if (w[1] == "binary_compressed") h.encoding = PcdEncoding::kBinaryCompressed;
-      else return bad("unknown DATA encoding '" + w[1] + "' (ascii, binary or binary_compressed)");
-      haveData = true;
-    } else if (lineNo == 1) {
+    const std::string e = headerLine(w, hl);
+    if (e.empty()) continue;
+    if (e == "?" && lineNo == 1)
       return Status::badInput(path + ": not a PCD file (line 1 is neither a comment nor a PCD header keyword)");
-    } else {
-      return bad("unknown header keyword '" + key.substr(0, 40) + "'");
-    }
+    return Status::badInput(path + ": line " + std::to_string(lineNo) + ": " +
+                            (e == "?" ? "unknown header keyword '" + w[0].substr(0, 40) + "'" : e));
   }
-  h.dataOffset = in.offset();
-  h.headerLines = uint64_t(lineNo);
+  return Status::ok();
+}
+
+// The fields' offsets, the point step and the point counts the header's lines imply.
+Status completeLayout(const std::string& path, HeaderLines& hl) {
+  PcdHeader& h = hl.h;
   if (h.fields.empty()) return Status::badInput(path + ": the header has no FIELDS line");
-  if (!haveSize || !haveType) return Status::badInput(path + ": the header lacks a SIZE or TYPE line");
+  if (!hl.size || !hl.type) return Status::badInput(path + ": the header lacks a SIZE or TYPE line");
   for (const auto& f : h.fields)
     if (f.type == 'F' && f.size != 4 && f.size != 8)
       return Status::badInput(path + ": field '" + f.name + "' is a " + std::to_string(f.size) + "-byte float");
@@ -298,10 +319,10 @@ Result<PcdHeader> readPcdHeader(const std::string& path) {
     if (step > kMaxPointStep) return Status::badInput(path + ": a point record would exceed " + std::to_string(kMaxPointStep) + " bytes");
   }
   h.pointStep = uint32_t(step);
-  if (!havePoints && !haveWidth) return Status::badInput(path + ": the header gives neither POINTS nor WIDTH");
-  if (!havePoints) h.points = h.width * (haveHeight ? h.height : 1);
-  if (!haveWidth && !haveHeight) { h.width = h.points; h.height = 1; }
-  if (!haveHeight) h.height = 1;
+  if (!hl.points && !hl.width) return Status::badInput(path + ": the header gives neither POINTS nor WIDTH");
+  if (!hl.points) h.points = h.width * (hl.height ? h.height : 1);
+  if (!hl.width && !hl.height) h.width = h.points, h.height = 1;
+  if (!hl.height) h.height = 1;
   if (h.points > kMaxPoints)
     return Status::badInput(path + ": POINTS " + std::to_string(h.points) + " is more than PCL's reader can index (" +
                             std::to_string(kMaxPoints) + ")");
@@ -313,138 +334,189 @@ Result<PcdHeader> readPcdHeader(const std::string& path) {
   h.hasNormals = r.nx >= 0 && r.ny >= 0 && r.nz >= 0;
   h.hasColors = r.rgb >= 0;
   h.hasIntensity = r.intensity >= 0;
-  // Sizes the body must have, checked before anything is allocated.
+  return Status::ok();
+}
+
+// The binary_compressed body's 8-byte size prefix against the file and the header.
+Status checkCompressedPrefix(const std::string& path, BufferedReader& in, const PcdHeader& h, uint64_t body, long double need) {
+  uint32_t sizes[2] = {0, 0};
+  if (body < 8 || !in.read(sizes, 8))
+    return Status::badInput(path + ": binary_compressed body shorter than its 8-byte size prefix (byte " + std::to_string(h.dataOffset) + ")");
+  const uint64_t compressed = sizes[0], uncompressed = sizes[1];
+  if (compressed > body - 8)
+    return Status::badInput(path + ": compressed block of " + std::to_string(compressed) + " bytes at byte " +
+                            std::to_string(h.dataOffset + 8) + " runs past the end of the file (" + std::to_string(in.fileSize()) + " bytes)");
+  if (static_cast<long double>(uncompressed) != need)
+    return Status::badInput(path + ": compressed block decompresses to " + std::to_string(uncompressed) + " bytes but " +
+                            std::to_string(h.points) + " points of " + std::to_string(h.pointStep) + " bytes need " +
+                            std::to_string(uint64_t(need)) + " (header corrupt)");
+  if (uncompressed > compressed * kMaxLzfRatio)
+    return Status::badInput(path + ": a " + std::to_string(compressed) + "-byte LZF block cannot hold " + std::to_string(uncompressed) +
+                            " bytes (header corrupt)");
+  return Status::ok();
+}
+
+// The sizes the body must have, checked before anything is allocated.
+Status checkBodySize(const std::string& path, BufferedReader& in, const PcdHeader& h) {
   const uint64_t body = in.fileSize() - h.dataOffset;
   const long double need = static_cast<long double>(h.points) * h.pointStep;
   if (h.encoding == PcdEncoding::kBinary) {
     if (need > static_cast<long double>(body))
       return Status::badInput(path + ": header declares " + std::to_string(h.points) + " points of " + std::to_string(h.pointStep) +
                               " bytes but the body has only " + std::to_string(body) + " bytes (file truncated or header corrupt)");
-  } else if (h.encoding == PcdEncoding::kAscii) {
+    return Status::ok();
+  }
+  if (h.encoding == PcdEncoding::kAscii) {
     uint64_t elems = 0;
     for (const auto& f : h.fields) elems += f.count;
     if (static_cast<long double>(h.points) * elems * 2 > static_cast<long double>(body) + 1)
       return Status::badInput(path + ": header declares " + std::to_string(h.points) + " points but the ascii body has only " +
                               std::to_string(body) + " bytes (file truncated or header corrupt)");
-  } else {
-    uint32_t sizes2[2] = {0, 0};
-    if (body < 8 || !in.read(sizes2, 8))
-      return Status::badInput(path + ": binary_compressed body shorter than its 8-byte size prefix (byte " +
-                              std::to_string(h.dataOffset) + ")");
-    const uint64_t compressed = sizes2[0], uncompressed = sizes2[1];
-    if (compressed > body - 8)
-      return Status::badInput(path + ": compressed block of " + std::to_string(compressed) + " bytes at byte " +
-                              std::to_string(h.dataOffset + 8) + " runs past the end of the file (" + std::to_string(in.fileSize()) + " bytes)");
-    if (static_cast<long double>(uncompressed) != need)
-      return Status::badInput(path + ": compressed block decompresses to " + std::to_string(uncompressed) + " bytes but " +
-                              std::to_string(h.points) + " points of " + std::to_string(h.pointStep) + " bytes need " +
-                              std::to_string(uint64_t(need)) + " (header corrupt)");
-    if (uncompressed > compressed * kMaxLzfRatio)
-      return Status::badInput(path + ": a " + std::to_string(compressed) + "-byte LZF block cannot hold " +
-                              std::to_string(uncompressed) + " bytes (header corrupt)");
+    return Status::ok();
   }
-  return h;
+  return checkCompressedPrefix(path, in, h, body, need);
 }
+
+}  // namespace
+
+Result<PcdHeader> readPcdHeader(const std::string& path) {
+  BufferedReader in;
+  SA_RETURN_IF_ERROR(in.open(path, 1 << 16));
+  HeaderLines hl;
+  int lineNo = 0;
+  SA_RETURN_IF_ERROR(readHeaderLines(path, in, hl, lineNo));
+  hl.h.dataOffset = in.offset();
+  hl.h.headerLines = uint64_t(lineNo);
+  SA_RETURN_IF_ERROR(completeLayout(path, hl));
+  SA_RETURN_IF_ERROR(checkBodySize(path, in, hl.h));
+  return hl.h;
+}
+
+namespace {
+
+// binary_compressed: one LZF block holding each field's values for all points, field after
+// field. PCL's decompressor inflates it; the header PCL never parses (its parser reads some
+// headers differently from this one and crashed on a fuzzed file that passed the checks above).
+Status readCompressedBody(const std::string& path, const PcdHeader& h, uint64_t fileBytes, size_t batchPoints, RecordConverter& conv) {
+  Mapping map;
+  SA_RETURN_IF_ERROR(map.open(path, fileBytes));
+  uint32_t sizes[2];
+  std::memcpy(sizes, map.data() + h.dataOffset, 8);
+  const uint64_t total = uint64_t(h.points) * h.pointStep;  // equals sizes[1], checked with the header
+  std::vector<uint8_t> soa(total);
+  if (total > 0 && pcl::lzfDecompress(map.data() + h.dataOffset + 8, sizes[0], soa.data(), static_cast<unsigned int>(total)) != total)
+    return Status::badInput(path + ": the binary_compressed block at byte " + std::to_string(h.dataOffset + 8) +
+                            " does not decompress to " + std::to_string(total) + " bytes (LZF data corrupt)");
+  std::vector<uint64_t> fieldStart;
+  uint64_t at = 0;
+  for (const auto& f : h.fields) {
+    fieldStart.push_back(at);
+    at += uint64_t(f.size) * f.count * h.points;
+  }
+  std::vector<uint8_t> aos;
+  for (uint64_t done = 0; done < h.points; done += batchPoints) {
+    const size_t n = size_t(std::min<uint64_t>(batchPoints, h.points - done));
+    aos.resize(n * h.pointStep);
+    for (size_t k = 0; k < h.fields.size(); ++k) {
+      const size_t bytes = size_t(h.fields[k].size) * h.fields[k].count;
+      const uint8_t* src = soa.data() + fieldStart[k] + done * bytes;
+      for (size_t i = 0; i < n; ++i) std::memcpy(aos.data() + i * h.pointStep + h.fields[k].offset, src + i * bytes, bytes);
+    }
+    SA_RETURN_IF_ERROR(conv.convert(aos.data(), n, done, h.pointStep));
+  }
+  return Status::ok();
+}
+
+Status readBinaryBody(const std::string& path, const PcdHeader& h, uint64_t fileBytes, size_t batchPoints, RecordConverter& conv) {
+  Mapping map;
+  SA_RETURN_IF_ERROR(map.open(path, fileBytes));
+  pcl::PCDReader reader;
+  pcl::PCLPointCloud2 cloud = emptyCloud(h);
+  for (uint64_t done = 0; done < h.points; done += batchPoints) {
+    const size_t n = size_t(std::min<uint64_t>(batchPoints, h.points - done));
+    cloud.width = uint32_t(n);
+    cloud.row_step = uint32_t(n * h.pointStep);
+    cloud.data.resize(n * h.pointStep);
+    const uint64_t at = h.dataOffset + done * h.pointStep;
+    if (reader.readBodyBinary(map.data() + at, cloud, pcl::PCDReader::PCD_V7, false, 0) < 0)
+      return Status::badInput(path + ": PCL could not read the binary body at byte " + std::to_string(at));
+    SA_RETURN_IF_ERROR(conv.convert(cloud.data.data(), n, done, h.pointStep));
+    map.release(at + n * h.pointStep);
+  }
+  return Status::ok();
+}
+
+// Up to `want` point lines of an ascii body into `text`, each checked (count and number syntax,
+// by line and column, since PCL reads a malformed number as 0); `got` counts them.
+Status takeAsciiLines(const std::string& path, std::istream& fs, uint64_t elems, size_t want, uint64_t& lineNo, std::string& text,
+                      size_t& got) {
+  std::string line;
+  text.clear();
+  got = 0;
+  while (got < want && std::getline(fs, line)) {
+    ++lineNo;
+    const auto w = words(line);
+    if (w.empty()) continue;
+    if (w.size() != elems)
+      return Status::badInput(path + ":" + std::to_string(lineNo) + ": expected " + std::to_string(elems) + " values, found " +
+                              std::to_string(w.size()));
+    for (size_t c = 0; c < w.size(); ++c)
+      if (!numberToken(w[c]) && !isNanToken(w[c]))
+        return Status::badInput(path + ":" + std::to_string(lineNo) + ": column " + std::to_string(c + 1) + ": expected a number, found '" +
+                                w[c].substr(0, 40) + "'");
+    text.append(line).push_back('\n');
+    ++got;
+  }
+  return Status::ok();
+}
+
+// ascii: lines checked here, then parsed by PCL one batch at a time.
+Status readAsciiBody(const std::string& path, const PcdHeader& h, size_t batchPoints, RecordConverter& conv) {
+  std::ifstream fs(path, std::ios::binary);
+  if (!fs) return Status::badInput(path + ": cannot open");
+  fs.seekg(std::streamoff(h.dataOffset));
+  uint64_t elems = 0;
+  for (const auto& f : h.fields) elems += f.count;
+  uint64_t lineNo = h.headerLines;
+  pcl::PCDReader reader;
+  pcl::PCLPointCloud2 cloud = emptyCloud(h);
+  std::string text;
+  for (uint64_t done = 0; done < h.points;) {
+    const size_t want = size_t(std::min<uint64_t>(batchPoints, h.points - done));
+    size_t got = 0;
+    SA_RETURN_IF_ERROR(takeAsciiLines(path, fs, elems, want, lineNo, text, got));
+    if (got < want)
+      return Status::badInput(path + ": the file ends after " + std::to_string(done + got) + " of " + std::to_string(h.points) +
+                              " points (line " + std::to_string(lineNo) + ")");
+    cloud.width = uint32_t(got);
+    cloud.row_step = uint32_t(got * h.pointStep);
+    cloud.data.assign(got * h.pointStep, 0);
+    std::istringstream is(text);
+    if (reader.readBodyASCII(is, cloud, pcl::PCDReader::PCD_V7) < 0)
+      return Status::badInput(path + ": PCL could not parse the points before line " + std::to_string(lineNo));
+    SA_RETURN_IF_ERROR(conv.convert(cloud.data.data(), got, done, h.pointStep));
+    done += got;
+  }
+  return Status::ok();
+}
+
+}  // namespace
 
 Status readPcd(const std::string& path, size_t batchPoints, BatchSink& sink, uint64_t* holes) {
   auto hdr = readPcdHeader(path);
   if (!hdr) return hdr.status();
   const PcdHeader& h = *hdr;
   quietPcl();
-  pcl::PCDReader reader;
   RecordConverter conv(h, sink);
   batchPoints = std::max<size_t>(1, batchPoints);
   auto fileBytes = fileSize(path);
   if (!fileBytes) return fileBytes.status();
-
   if (h.encoding == PcdEncoding::kBinaryCompressed) {
-    // One LZF block holding each field's values for all points, field after field. PCL's
-    // decompressor inflates it; the header PCL never parses (its parser reads some headers
-    // differently from this one and crashed on a fuzzed file that passed the checks above).
-    Mapping map;
-    SA_RETURN_IF_ERROR(map.open(path, *fileBytes));
-    uint32_t sizes[2];
-    std::memcpy(sizes, map.data() + h.dataOffset, 8);
-    const uint64_t total = uint64_t(h.points) * h.pointStep;  // equals sizes[1], checked with the header
-    std::vector<uint8_t> soa(total);
-    if (total > 0 &&
-        pcl::lzfDecompress(map.data() + h.dataOffset + 8, sizes[0], soa.data(), static_cast<unsigned int>(total)) != total)
-      return Status::badInput(path + ": the binary_compressed block at byte " + std::to_string(h.dataOffset + 8) +
-                              " does not decompress to " + std::to_string(total) + " bytes (LZF data corrupt)");
-    std::vector<uint64_t> fieldStart;
-    uint64_t at = 0;
-    for (const auto& f : h.fields) {
-      fieldStart.push_back(at);
-      at += uint64_t(f.size) * f.count * h.points;
-    }
-    std::vector<uint8_t> aos;
-    for (uint64_t done = 0; done < h.points; done += batchPoints) {
-      const size_t n = size_t(std::min<uint64_t>(batchPoints, h.points - done));
-      aos.resize(n * h.pointStep);
-      for (size_t k = 0; k < h.fields.size(); ++k) {
-        const size_t bytes = size_t(h.fields[k].size) * h.fields[k].count;
-        const uint8_t* src = soa.data() + fieldStart[k] + done * bytes;
-        for (size_t i = 0; i < n; ++i) std::memcpy(aos.data() + i * h.pointStep + h.fields[k].offset, src + i * bytes, bytes);
-      }
-      SA_RETURN_IF_ERROR(conv.convert(aos.data(), n, done, h.pointStep));
-    }
+    SA_RETURN_IF_ERROR(readCompressedBody(path, h, *fileBytes, batchPoints, conv));
   } else if (h.encoding == PcdEncoding::kBinary) {
-    Mapping map;
-    SA_RETURN_IF_ERROR(map.open(path, *fileBytes));
-    pcl::PCLPointCloud2 cloud = emptyCloud(h);
-    for (uint64_t done = 0; done < h.points; done += batchPoints) {
-      const size_t n = size_t(std::min<uint64_t>(batchPoints, h.points - done));
-      cloud.width = uint32_t(n);
-      cloud.row_step = uint32_t(n * h.pointStep);
-      cloud.data.resize(n * h.pointStep);
-      const uint64_t at = h.dataOffset + done * h.pointStep;
-      if (reader.readBodyBinary(map.data() + at, cloud, pcl::PCDReader::PCD_V7, false, 0) < 0)
-        return Status::badInput(path + ": PCL could not read the binary body at byte " + std::to_string(at));
-      SA_RETURN_IF_ERROR(conv.convert(cloud.data.data(), n, done, h.pointStep));
-      map.release(at + n * h.pointStep);
-    }
+    SA_RETURN_IF_ERROR(readBinaryBody(path, h, *fileBytes, batchPoints, conv));
   } else {
-    // ascii: lines are checked here (count and number syntax, by line and column, since PCL
-    // reads a malformed number as 0), then parsed by PCL one batch at a time.
-    std::ifstream fs(path, std::ios::binary);
-    if (!fs) return Status::badInput(path + ": cannot open");
-    fs.seekg(std::streamoff(h.dataOffset));
-    uint64_t elems = 0;
-    for (const auto& f : h.fields) elems += f.count;
-    uint64_t lineNo = h.headerLines;
-    pcl::PCLPointCloud2 cloud = emptyCloud(h);
-    std::string line, text;
-    uint64_t done = 0;
-    while (done < h.points) {
-      const size_t want = size_t(std::min<uint64_t>(batchPoints, h.points - done));
-      text.clear();
-      size_t got = 0;
-      while (got < want && std::getline(fs, line)) {
-        ++lineNo;
-        const auto w = words(line);
-        if (w.empty()) continue;
-        if (w.size() != elems)
-          return Status::badInput(path + ":" + std::to_string(lineNo) + ": expected " + std::to_string(elems) +
-                                  " values, found " + std::to_string(w.size()));
-        for (size_t c = 0; c < w.size(); ++c)
-          if (!numberToken(w[c]) && !isNanToken(w[c]))
-            return Status::badInput(path + ":" + std::to_string(lineNo) + ": column " + std::to_string(c + 1) +
-                                    ": expected a number, found '" + w[c].substr(0, 40) + "'");
-        text.append(line).push_back('\n');
-        ++got;
-      }
-      if (got < want)
-        return Status::badInput(path + ": the file ends after " + std::to_string(done + got) + " of " +
-                                std::to_string(h.points) + " points (line " + std::to_string(lineNo) + ")");
-      cloud.width = uint32_t(got);
-      cloud.row_step = uint32_t(got * h.pointStep);
-      cloud.data.assign(got * h.pointStep, 0);
-      std::istringstream is(text);
-      if (reader.readBodyASCII(is, cloud, pcl::PCDReader::PCD_V7) < 0)
-        return Status::badInput(path + ": PCL could not parse the points before line " + std::to_string(lineNo));
-      SA_RETURN_IF_ERROR(conv.convert(cloud.data.data(), got, done, h.pointStep));
-      done += got;
-    }
+    SA_RETURN_IF_ERROR(readAsciiBody(path, h, batchPoints, conv));
   }
   if (holes) *holes = conv.holes();
   return Status::ok();
