@@ -344,8 +344,7 @@ const SectionEntry* PackReader::find(const char id[4]) const {
 
 TileRegion gutteredTile(const CellRecord& c) { return {c.tileX - 1u, c.tileY - 1u, c.tileW + 2u, c.tileH + 2u}; }
 
-Status PackReader::open(const std::string& path, PageLoad pages) {
-  path_ = path;
+Status PackReader::mapFile(const std::string& path) {
   int fd = ::open(path.c_str(), O_RDONLY);
   if (fd < 0) return Status::badInput(path + ": cannot open: " + std::strerror(errno));
   struct stat st;
@@ -363,6 +362,11 @@ Status PackReader::open(const std::string& path, PageLoad pages) {
   if (m == MAP_FAILED) return Status::badInput(path + ": cannot map: " + std::strerror(errno));
   base_ = static_cast<const uint8_t*>(m);
   header_ = reinterpret_cast<const PackHeader*>(base_);
+  return Status::ok();
+}
+
+Status PackReader::checkHeader() const {
+  const std::string& path = path_;
   if (std::memcmp(header_->magic, kPackMagic, 8) != 0)
     return Status::badInput(path + ": not a ScanAtlas pack (bad magic); packs are made by 'scanatlas pack'");
   if (header_->byteOrder != kByteOrderMark)
@@ -379,81 +383,111 @@ Status PackReader::open(const std::string& path, PageLoad pages) {
   if (header_->fileSize != size_)
     return Status::badInput(path + ": file is " + std::to_string(size_) + " bytes but its header says " +
                             std::to_string(header_->fileSize) + " (truncated or appended to)");
+  return Status::ok();
+}
+
+Status PackReader::checkSectionTable() {
   if (header_->sectionCount == 0 || header_->sectionCount > 64 ||
       header_->sectionTableOffset < sizeof(PackHeader) || header_->sectionTableOffset > size_ ||
       uint64_t(header_->sectionCount) * sizeof(SectionEntry) > size_ - header_->sectionTableOffset)
-    return Status::badInput(path + ": corrupt section table");
+    return Status::badInput(path_ + ": corrupt section table");
   sections_ = reinterpret_cast<const SectionEntry*>(base_ + header_->sectionTableOffset);
   if (crcOf(reinterpret_cast<const uint8_t*>(sections_), header_->sectionCount * sizeof(SectionEntry)) !=
       header_->sectionTableCrc)
-    return Status::badInput(path + ": section table checksum mismatch (file corrupt)");
+    return Status::badInput(path_ + ": section table checksum mismatch (file corrupt)");
   for (uint32_t i = 0; i < header_->sectionCount; ++i) {
     const SectionEntry& s = sections_[i];
     if (s.offset > size_ || s.size > size_ - s.offset || s.offset % 8 != 0)
-      return Status::badInput(path + ": section " + std::string(s.id, 4) + " lies outside the file");
+      return Status::badInput(path_ + ": section " + std::string(s.id, 4) + " lies outside the file");
   }
+  return Status::ok();
+}
+
+Status PackReader::checkMetaAndCells(bool compressed) {
   const SectionEntry* meta = find("META");
   const SectionEntry* cell = find("CELL");
-  const SectionEntry* hght = find("HGHT");
-  const bool compressed = !hght && find("HGTZ");
-  if (!meta || !cell || (!hght && !compressed))
-    return Status::badInput(path + ": missing a required section (META, CELL, HGHT or HGTZ)");
-  if (meta->size != sizeof(PackMeta)) return Status::badInput(path + ": META section has the wrong size");
+  if (!meta || !cell || (!find("HGHT") && !compressed))
+    return Status::badInput(path_ + ": missing a required section (META, CELL, HGHT or HGTZ)");
+  if (meta->size != sizeof(PackMeta)) return Status::badInput(path_ + ": META section has the wrong size");
   if (crcOf(base_ + meta->offset, meta->size) != meta->crc)
-    return Status::badInput(path + ": META checksum mismatch (file corrupt)");
+    return Status::badInput(path_ + ": META checksum mismatch (file corrupt)");
   meta_ = reinterpret_cast<const PackMeta*>(base_ + meta->offset);
   if (cell->size != uint64_t(meta_->cellCount) * sizeof(CellRecord))
-    return Status::badInput(path + ": CELL section size does not match the cell count");
+    return Status::badInput(path_ + ": CELL section size does not match the cell count");
   if (crcOf(base_ + cell->offset, cell->size) != cell->crc)
-    return Status::badInput(path + ": CELL checksum mismatch (file corrupt)");
+    return Status::badInput(path_ + ": CELL checksum mismatch (file corrupt)");
   cells_ = reinterpret_cast<const CellRecord*>(base_ + cell->offset);
   const uint32_t P = meta_->pageWidth, PH = meta_->pageHeight;
   for (uint32_t d : {P, PH})
     if (d == 0 || d > 65536 || (d & (d - 1)))
-      return Status::badInput(path + ": page size " + std::to_string(P) + "x" + std::to_string(PH) +
+      return Status::badInput(path_ + ": page size " + std::to_string(P) + "x" + std::to_string(PH) +
                               " is not a power of two <= 65536 on each side");
-  const uint64_t pageTexels = uint64_t(P) * PH;
-  if (compressed) {
-    // Decoded pages take memory the file does not hold: bound them by the cells and the file.
-    const uint64_t perTexel = 2 + ((meta_->flags & kPackHasNormals) ? kNormalBytes : 0) + ((meta_->flags & kPackHasColor) ? 4 : 0);
-    const uint64_t limit = std::max<uint64_t>(uint64_t(256) << 20, 4096 * size_);
-    if (meta_->pageCount > std::max<uint32_t>(1, meta_->cellCount) || meta_->pageCount > limit / (pageTexels * perTexel))
-      return Status::badInput(path + ": " + std::to_string(meta_->pageCount) + " pages of " + std::to_string(P) + "x" +
-                              std::to_string(PH) + " is more than its " + std::to_string(meta_->cellCount) +
-                              " cells and " + std::to_string(size_) + " bytes can hold");
-    for (const char* id : {"NRMZ", "COLZ"}) {
-      const bool wanted = (meta_->flags & (id[0] == 'N' ? kPackHasNormals : kPackHasColor)) != 0;
-      if (wanted && !find(id)) return Status::badInput(path + ": " + (id[0] == 'N' ? "normal" : "colour") +
-                                                         std::string(" flag set but section ") + id + " missing");
-    }
-  } else {
-    // pageTexels * pageCount * 4 can pass 2^64 for hostile headers; bound the count by the file first.
-    if (meta_->pageCount > size_ / (pageTexels * 2) || hght->size != pageTexels * meta_->pageCount * 2)
-      return Status::badInput(path + ": HGHT section size does not match page size and count");
-    hght_ = reinterpret_cast<const uint16_t*>(base_ + hght->offset);
-    if (meta_->flags & kPackHasNormals) {
-      const SectionEntry* nrml = find("NRML");
-      if (!nrml || nrml->size != pageTexels * meta_->pageCount * kNormalBytes)
-        return Status::badInput(path + ": normal flag set but NRML section missing or of the wrong size");
-      nrml_ = base_ + nrml->offset;
-    }
-    if (meta_->flags & kPackHasColor) {
-      const SectionEntry* colr = find("COLR");
-      if (!colr || colr->size != pageTexels * meta_->pageCount * 4)
-        return Status::badInput(path + ": colour flag set but COLR section missing or of the wrong size");
-      colr_ = base_ + colr->offset;
-    }
+  return Status::ok();
+}
+
+// Decoded pages take memory the file does not hold: bound them by the cells and the file.
+Status PackReader::checkCodedPages() const {
+  const uint64_t pageTexels = uint64_t(meta_->pageWidth) * meta_->pageHeight;
+  const uint64_t perTexel = 2 + ((meta_->flags & kPackHasNormals) ? kNormalBytes : 0) + ((meta_->flags & kPackHasColor) ? 4 : 0);
+  const uint64_t limit = std::max<uint64_t>(uint64_t(256) << 20, 4096 * size_);
+  if (meta_->pageCount > std::max<uint32_t>(1, meta_->cellCount) || meta_->pageCount > limit / (pageTexels * perTexel))
+    return Status::badInput(path_ + ": " + std::to_string(meta_->pageCount) + " pages of " + std::to_string(meta_->pageWidth) + "x" +
+                            std::to_string(meta_->pageHeight) + " is more than its " + std::to_string(meta_->cellCount) +
+                            " cells and " + std::to_string(size_) + " bytes can hold");
+  for (const char* id : {"NRMZ", "COLZ"}) {
+    const bool wanted = (meta_->flags & (id[0] == 'N' ? kPackHasNormals : kPackHasColor)) != 0;
+    if (wanted && !find(id))
+      return Status::badInput(path_ + ": " + (id[0] == 'N' ? "normal" : "colour") + std::string(" flag set but section ") + id + " missing");
   }
+  return Status::ok();
+}
+
+Status PackReader::checkRawPages(const SectionEntry& hght) {
+  const uint64_t pageTexels = uint64_t(meta_->pageWidth) * meta_->pageHeight;
+  // pageTexels * pageCount * 4 can pass 2^64 for hostile headers; bound the count by the file first.
+  if (meta_->pageCount > size_ / (pageTexels * 2) || hght.size != pageTexels * meta_->pageCount * 2)
+    return Status::badInput(path_ + ": HGHT section size does not match page size and count");
+  hght_ = reinterpret_cast<const uint16_t*>(base_ + hght.offset);
+  if (meta_->flags & kPackHasNormals) {
+    const SectionEntry* nrml = find("NRML");
+    if (!nrml || nrml->size != pageTexels * meta_->pageCount * kNormalBytes)
+      return Status::badInput(path_ + ": normal flag set but NRML section missing or of the wrong size");
+    nrml_ = base_ + nrml->offset;
+  }
+  if (meta_->flags & kPackHasColor) {
+    const SectionEntry* colr = find("COLR");
+    if (!colr || colr->size != pageTexels * meta_->pageCount * 4)
+      return Status::badInput(path_ + ": colour flag set but COLR section missing or of the wrong size");
+    colr_ = base_ + colr->offset;
+  }
+  return Status::ok();
+}
+
+Status PackReader::checkCellRecords() const {
+  const uint32_t P = meta_->pageWidth, PH = meta_->pageHeight;
   for (uint32_t i = 0; i < meta_->cellCount; ++i) {
     const CellRecord& c = cells_[i];
     if (c.page >= meta_->pageCount || c.tileW == 0 || c.tileH == 0 || c.tileX < 1 || c.tileY < 1 ||
         uint64_t(c.tileX) + c.tileW + 1 > P || uint64_t(c.tileY) + c.tileH + 1 > PH)
-      return Status::badInput(path + ": cell " + std::to_string(i) + " has a tile outside its page");
+      return Status::badInput(path_ + ": cell " + std::to_string(i) + " has a tile outside its page");
     for (double d : c.box)
-      if (!std::isfinite(d)) return Status::badInput(path + ": cell " + std::to_string(i) + " has a non-finite box");
+      if (!std::isfinite(d)) return Status::badInput(path_ + ": cell " + std::to_string(i) + " has a non-finite box");
     if (!(c.box[1] >= c.box[0] && c.box[3] >= c.box[2] && c.box[5] >= c.box[4]))
-      return Status::badInput(path + ": cell " + std::to_string(i) + " has an inverted box");
+      return Status::badInput(path_ + ": cell " + std::to_string(i) + " has an inverted box");
   }
+  return Status::ok();
+}
+
+Status PackReader::open(const std::string& path, PageLoad pages) {
+  path_ = path;
+  SA_RETURN_IF_ERROR(mapFile(path));
+  SA_RETURN_IF_ERROR(checkHeader());
+  SA_RETURN_IF_ERROR(checkSectionTable());
+  const SectionEntry* hght = find("HGHT");
+  const bool compressed = !hght && find("HGTZ");
+  SA_RETURN_IF_ERROR(checkMetaAndCells(compressed));
+  SA_RETURN_IF_ERROR(compressed ? checkCodedPages() : checkRawPages(*hght));
+  SA_RETURN_IF_ERROR(checkCellRecords());
   if (!compressed || pages == PageLoad::kNone) return Status::ok();
   SA_RETURN_IF_ERROR(checkTileIndexes());
   if (pages == PageLoad::kTiles) return Status::ok();

@@ -203,6 +203,14 @@ class PackReader {
     ~OwnedPages();
     Status allocate(uint64_t bytes);
   };
+  // open()'s steps, in order: each checks what the next relies on.
+  Status mapFile(const std::string& path);
+  Status checkHeader() const;
+  Status checkSectionTable();
+  Status checkMetaAndCells(bool compressed);
+  Status checkCodedPages() const;
+  Status checkRawPages(const SectionEntry& hght);
+  Status checkCellRecords() const;
   Status checkTileIndexes();
   Status reservePages();
   Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* out, uint32_t stride, TileRegion r, uint32_t i) const;
