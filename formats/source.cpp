@@ -138,6 +138,140 @@ class FileAdapter : public BatchSink {
 
 }  // namespace
 
+namespace {
+
+// OpenMesh parses the whole file even to count: record what it delivers and replay that.
+Result<InputFile> meshFile(const std::string& path, const std::string& ext) {
+  auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
+  SA_RETURN_IF_ERROR(readMesh(path, kDefaultBatchPoints, true, *rec));
+  rec->finish();
+  InputFile f;
+  f.path = path;
+  f.format = InputFormat::kMesh;
+  f.points = rec->points();
+  f.hasNormals = rec->anyNormals();
+  f.hasColors = rec->anyColors();
+  f.hasFaces = rec->triangles() > 0;
+  f.recording = std::move(rec);
+  f.up = ext == ".stl" ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitY();  // STL comes from CAD: z up
+  return f;
+}
+
+Result<InputFile> pcdFile(const std::string& path) {
+  auto h = readPcdHeader(path);
+  if (!h) return h.status();
+  InputFile f;
+  f.path = path;
+  f.format = InputFormat::kPcd;
+  f.points = h->points;
+  f.hasNormals = h->hasNormals;
+  f.hasColors = h->hasColors;
+  f.hasIntensity = h->hasIntensity;
+  const char* enc[] = {"ascii", "binary", "binary_compressed"};
+  f.detail = std::string(enc[int(h->encoding)]) +
+             (h->organized() ? ", organized " + std::to_string(h->width) + "x" + std::to_string(h->height) : ", unorganized");
+  if (h->organized()) {
+    // An organized cloud is a camera's image: y points down the image.
+    f.up = -Eigen::Vector3d::UnitY();
+    f.upIsConvention = f.upFromCamera = true;
+  }
+  return f;
+}
+
+// libdraco decodes the whole file even to count: record what it delivers and replay that.
+Result<InputFile> dracoFile(const std::string& path) {
+  auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
+  DracoInfo info;
+  SA_RETURN_IF_ERROR(readDraco(path, kDefaultBatchPoints, true, *rec, &info));
+  rec->finish();
+  InputFile f;
+  f.path = path;
+  f.format = InputFormat::kDraco;
+  f.points = info.points;
+  f.hasNormals = info.hasNormals;
+  f.hasColors = info.hasColors;
+  f.hasFaces = info.triangles > 0;
+  f.hasIntensity = info.hasIntensity;
+  f.hasConfidence = info.hasConfidence;
+  f.hasClassification = info.hasClassification;
+  f.detail = info.triangles ? "mesh, " + std::to_string(info.triangles) + " triangles" : "point cloud";
+  if (info.shifted) f.detail += ", positions relative to a recorded origin";
+  f.recording = std::move(rec);
+  f.up = Eigen::Vector3d::UnitY();
+  return f;
+}
+
+Result<InputFile> textFile(const std::string& path, const std::string& textColumns) {
+  auto layout = readTextLayout(path, textColumns);
+  if (!layout) return layout.status();
+  InputFile f;
+  f.path = path;
+  f.format = InputFormat::kText;
+  f.points = layout->dataLines;
+  f.hasNormals = layout->hasNormals;
+  f.hasColors = layout->hasColors;
+  f.hasIntensity = layout->hasIntensity;
+  f.hasConfidence = layout->hasConfidence;
+  f.hasClassification = layout->hasClassification;
+  f.columns = textColumns;
+  f.up = Eigen::Vector3d::UnitY();
+  return f;
+}
+
+}  // namespace
+
+// A Stanford scan set: one PLY range grid per scan, each with its pose and scanner direction.
+Status InputSet::addConf(const std::string& path) {
+  auto scans = readConf(path);
+  if (!scans) return scans.status();
+  for (const auto& s : *scans) {
+    SA_RETURN_IF_ERROR(addPly(s.path, files_, warnings_));
+    InputFile& f = files_.back();
+    f.transformed = true;
+    f.rotation = s.rotation;
+    f.translation = s.translation;
+    f.scanIndex = static_cast<int>(towardScanner_.size());
+    f.hasFaces = false;  // range grids are not triangles
+    f.up = Eigen::Vector3d::UnitY();  // Stanford's scans are y-up
+    f.upIsConvention = true;
+    towardScanner_.push_back(s.towardScanner);
+  }
+  return Status::ok();
+}
+
+Status InputSet::addLasFile(const std::string& path) {
+  bool terrainLike = false;
+  SA_RETURN_IF_ERROR(addLas(path, files_, terrainLike));
+  // LAS is georeferenced with z up. Airborne data (flat and wide: height range under a fifth of
+  // the horizontal extent) is seen from above: estimated normals face +z. Terrestrial scans
+  // keep the default (away from the centroid).
+  if (terrainLike) {
+    files_.back().scanIndex = static_cast<int>(towardScanner_.size());
+    towardScanner_.push_back(Eigen::Vector3d::UnitZ());
+  }
+  return Status::ok();
+}
+
+Status InputSet::add(const std::string& path, const std::string& textColumns) {
+  const std::string ext = lowerExtension(path);
+  if (ext == ".conf") return addConf(path);
+  if (ext == ".ply") {
+    SA_RETURN_IF_ERROR(addPly(path, files_, warnings_));
+    files_.back().up = Eigen::Vector3d::UnitY();
+    return Status::ok();
+  }
+  if (ext == ".las" || ext == ".laz") return addLasFile(path);
+  Result<InputFile> f = Status::badInput(path + ": unsupported input format '" + ext +
+                                         "' (supported: .ply, .conf scan sets, .pcd, .drc, .las, .obj/.off/.stl, .xyz/.pts/.csv/.txt)");
+  if (ext == ".obj" || ext == ".off" || ext == ".stl") f = meshFile(path, ext);
+  else if (ext == ".pcd") f = pcdFile(path);
+  else if (ext == ".drc") f = dracoFile(path);
+  else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") f = textFile(path, textColumns);
+  if (!f) return f.status();
+  files_.push_back(std::move(*f));
+  return Status::ok();
+}
+
 Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std::string& textColumns) {
   InputSet set;
   if (paths.empty()) return Status::badInput("no input files given");
@@ -145,109 +279,7 @@ Result<InputSet> InputSet::open(const std::vector<std::string>& paths, const std
     std::error_code ec;
     const auto abs = std::filesystem::absolute(path, ec);
     set.sourcePaths_.push_back(ec ? path : abs.lexically_normal().string());
-    const std::string ext = lowerExtension(path);
-    if (ext == ".conf") {
-      auto scans = readConf(path);
-      if (!scans) return scans.status();
-      for (const auto& s : *scans) {
-        SA_RETURN_IF_ERROR(addPly(s.path, set.files_, set.warnings_));
-        InputFile& f = set.files_.back();
-        f.transformed = true;
-        f.rotation = s.rotation;
-        f.translation = s.translation;
-        f.scanIndex = static_cast<int>(set.towardScanner_.size());
-        f.hasFaces = false;  // range grids are not triangles
-        f.up = Eigen::Vector3d::UnitY();  // Stanford's scans are y-up
-        f.upIsConvention = true;
-        set.towardScanner_.push_back(s.towardScanner);
-      }
-    } else if (ext == ".ply") {
-      SA_RETURN_IF_ERROR(addPly(path, set.files_, set.warnings_));
-      set.files_.back().up = Eigen::Vector3d::UnitY();
-    } else if (ext == ".las" || ext == ".laz") {
-      bool terrainLike = false;
-      SA_RETURN_IF_ERROR(addLas(path, set.files_, terrainLike));
-      // LAS is georeferenced with z up. Airborne data (flat and wide: height range under a
-      // fifth of the horizontal extent) is seen from above: estimated normals face +z.
-      // Terrestrial scans keep the default (away from the centroid).
-      if (terrainLike) {
-        set.files_.back().scanIndex = static_cast<int>(set.towardScanner_.size());
-        set.towardScanner_.push_back(Eigen::Vector3d::UnitZ());
-      }
-    } else if (ext == ".obj" || ext == ".off" || ext == ".stl") {
-      // OpenMesh parses the whole file even to count: record what it delivers and replay that.
-      auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
-      SA_RETURN_IF_ERROR(readMesh(path, kDefaultBatchPoints, true, *rec));
-      rec->finish();
-      InputFile f;
-      f.path = path;
-      f.format = InputFormat::kMesh;
-      f.points = rec->points();
-      f.hasNormals = rec->anyNormals();
-      f.hasColors = rec->anyColors();
-      f.hasFaces = rec->triangles() > 0;
-      f.recording = std::move(rec);
-      f.up = ext == ".stl" ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitY();  // STL comes from CAD: z up
-      set.files_.push_back(f);
-    } else if (ext == ".pcd") {
-      auto h = readPcdHeader(path);
-      if (!h) return h.status();
-      InputFile f;
-      f.path = path;
-      f.format = InputFormat::kPcd;
-      f.points = h->points;
-      f.hasNormals = h->hasNormals;
-      f.hasColors = h->hasColors;
-      f.hasIntensity = h->hasIntensity;
-      const char* enc[] = {"ascii", "binary", "binary_compressed"};
-      f.detail = std::string(enc[int(h->encoding)]) +
-                 (h->organized() ? ", organized " + std::to_string(h->width) + "x" + std::to_string(h->height) : ", unorganized");
-      if (h->organized()) {
-        // An organized cloud is a camera's image: y points down the image.
-        f.up = -Eigen::Vector3d::UnitY();
-        f.upIsConvention = f.upFromCamera = true;
-      }
-      set.files_.push_back(f);
-    } else if (ext == ".drc") {
-      // libdraco decodes the whole file even to count: record what it delivers and replay that.
-      auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
-      DracoInfo info;
-      SA_RETURN_IF_ERROR(readDraco(path, kDefaultBatchPoints, true, *rec, &info));
-      rec->finish();
-      InputFile f;
-      f.path = path;
-      f.format = InputFormat::kDraco;
-      f.points = info.points;
-      f.hasNormals = info.hasNormals;
-      f.hasColors = info.hasColors;
-      f.hasFaces = info.triangles > 0;
-      f.hasIntensity = info.hasIntensity;
-      f.hasConfidence = info.hasConfidence;
-      f.hasClassification = info.hasClassification;
-      f.detail = info.triangles ? "mesh, " + std::to_string(info.triangles) + " triangles" : "point cloud";
-      if (info.shifted) f.detail += ", positions relative to a recorded origin";
-      f.recording = std::move(rec);
-      f.up = Eigen::Vector3d::UnitY();
-      set.files_.push_back(f);
-    } else if (ext == ".xyz" || ext == ".pts" || ext == ".csv" || ext == ".txt") {
-      auto layout = readTextLayout(path, textColumns);
-      if (!layout) return layout.status();
-      InputFile f;
-      f.path = path;
-      f.format = InputFormat::kText;
-      f.points = layout->dataLines;
-      f.hasNormals = layout->hasNormals;
-      f.hasColors = layout->hasColors;
-      f.hasIntensity = layout->hasIntensity;
-      f.hasConfidence = layout->hasConfidence;
-      f.hasClassification = layout->hasClassification;
-      f.columns = textColumns;
-      f.up = Eigen::Vector3d::UnitY();
-      set.files_.push_back(f);
-    } else {
-      return Status::badInput(path + ": unsupported input format '" + ext +
-                              "' (supported: .ply, .conf scan sets, .pcd, .drc, .las, .obj/.off/.stl, .xyz/.pts/.csv/.txt)");
-    }
+    SA_RETURN_IF_ERROR(set.add(path, textColumns));
   }
   if (set.files_.size() > 1) {
     for (auto& f : set.files_) {

@@ -77,6 +77,10 @@ class InputSet {
   Status stream(BatchSink& sink, bool readTriangles, size_t batchPoints = kDefaultBatchPoints) const;
 
  private:
+  // One path's files (a .conf scan set adds one per scan).
+  Status add(const std::string& path, const std::string& textColumns);
+  Status addConf(const std::string& path);
+  Status addLasFile(const std::string& path);
   std::vector<InputFile> files_;
   std::vector<Eigen::Vector3d> towardScanner_;
   std::vector<std::string> warnings_;
