@@ -394,7 +394,109 @@ void drawSurfacePanel(AppState& s) {
   }
 }
 
-void drawPanel(AppState& s, GLFWwindow* win) {
+void drawShadingPanel(AppState& s) {
+  if (!ImGui::CollapsingHeader("Shading", ImGuiTreeNodeFlags_DefaultOpen)) return;
+  const char* modes[] = {"Lambert, head light", "normals", "height ramp", "scan colour"};
+  if (ImGui::Combo("shading", &s.shadingChoice, modes, 4)) {
+    s.rs.useColor = s.shadingChoice == 3;
+    s.rs.shading = s.shadingChoice == 1 ? Shading::kNormals : s.shadingChoice == 2 ? Shading::kHeight : Shading::kLambert;
+  }
+  ImGui::Checkbox("head light", &s.rs.headLight);
+  if (!s.rs.headLight) {
+    ImGui::Checkbox("self-shadows (second cast toward the light)", &s.rs.shadows);
+    static float az = 30.f, el = 45.f;
+    ImGui::SliderFloat("light azimuth", &az, -180.f, 180.f);
+    ImGui::SliderFloat("light elevation", &el, -89.f, 89.f);
+    const Eigen::Vector3d up = s.rs.up.normalized();
+    const Eigen::Vector3d a = (std::abs(up.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitZ()).cross(up).normalized();
+    const Eigen::Vector3d b = up.cross(a);
+    const double ra = az * M_PI / 180, re = el * M_PI / 180;
+    s.rs.lightDir = std::cos(re) * (std::cos(ra) * b + std::sin(ra) * a) + std::sin(re) * up;
+  }
+  ImGui::Checkbox("eye-dome lighting", &s.rs.edl);
+  if (s.rs.edl) ImGui::SliderFloat("EDL strength", &s.rs.edlStrength, 0.1f, 5.f);
+  ImGui::ColorEdit3("background", s.rs.background);
+}
+
+void drawClipPanel(AppState& s) {
+  if (!ImGui::CollapsingHeader("Clip")) return;
+  bool changed = ImGui::Checkbox("clip box", &s.clipBoxOn);
+  changed |= ImGui::SliderFloat3("min", s.clipBox, 0.f, 1.f);
+  changed |= ImGui::SliderFloat3("max", s.clipBox + 3, 0.f, 1.f);
+  changed |= ImGui::Checkbox("section plane", &s.sectionOn);
+  const char* axes[] = {"x", "y", "z"};
+  changed |= ImGui::Combo("axis", &s.sectionAxis, axes, 3);
+  changed |= ImGui::SliderFloat("at", &s.sectionAt, 0.f, 1.f);
+  if (changed) applyClip(s);
+}
+
+void drawMeasurePanel(AppState& s) {
+  if (!ImGui::CollapsingHeader("Measure", ImGuiTreeNodeFlags_DefaultOpen)) return;
+  ImGui::TextWrapped("P: pick under the cursor. Double-click: set the orbit pivot.");
+  for (size_t i = 0; i < s.picks.size(); ++i) ImGui::Text("%zu: %.4f %.4f %.4f", i, s.picks[i].p.x(), s.picks[i].p.y(), s.picks[i].p.z());
+  if (ImGui::Button("distance")) measure(s, "distance");
+  ImGui::SameLine();
+  if (ImGui::Button("polyline")) measure(s, "polyline");
+  ImGui::SameLine();
+  if (ImGui::Button("height")) measure(s, "height");
+  ImGui::SameLine();
+  if (ImGui::Button("clear")) s.picks.clear();
+  if (ImGui::Button("export CSV")) {
+    const std::string path = s.packPath + ".measurements.csv";
+    std::string text;
+    for (const auto& r : s.results) text += r + "\n";
+    Status st = writeFileAtomic(path, text.data(), text.size());
+    s.status = st ? "wrote " + path : st.message();
+  }
+}
+
+void drawViewsPanel(AppState& s) {
+  if (!ImGui::CollapsingHeader("Views")) return;
+  if (ImGui::Button("bookmark view (B)")) {
+    Status st = bookmark(s);
+    if (!st) s.status = st.message();
+  }
+  ImGui::SameLine();
+  if (ImGui::Button("screenshot (F12)")) {
+    Status st = screenshot(s, s.packPath + ".screenshot.png");
+    if (!st) s.status = st.message();
+  }
+  const std::string views = s.packPath + ".views.json";
+  if (std::filesystem::exists(views)) {
+    auto cams = readCameraPath(views, s.cc.camera().width, s.cc.camera().height);
+    for (size_t i = 0; cams && i < cams->size(); ++i) {
+      if (i % 6) ImGui::SameLine();
+      if (ImGui::Button(("view " + std::to_string(i + 1)).c_str())) {
+        s.cc.camera() = (*cams)[i];
+        s.pivot = (*cams)[i].target;
+      }
+    }
+  }
+  static bool vsync = true;
+  if (ImGui::Checkbox("vsync", &vsync)) glfwSwapInterval(vsync ? 1 : 0);
+}
+
+void drawKeysWindow(AppState& s) {
+  if (!s.showHelp) return;
+  ImGui::SetNextWindowPos(ImVec2(360, 10), ImGuiCond_FirstUseEver);
+  ImGui::Begin("Keys (H)", &s.showHelp);
+  ImGui::TextUnformatted(
+      "left drag      orbit about the pivot\n"
+      "middle / shift-drag   pan\n"
+      "wheel          zoom toward the cursor\n"
+      "double-click   set the pivot on the surface\n"
+      "W A S D Q E    fly (shift: faster)\n"
+      "F              frame all\n"
+      "1 / 3 / 7      front / side / top view\n"
+      "P              pick a point (measure)\n"
+      "B              bookmark the view\n"
+      "F12            screenshot\n"
+      "H              this help\n"
+      "Esc            clear picks");
+  ImGui::End();
+}
+
+void drawPanel(AppState& s) {
   ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowSize(ImVec2(330, 560), ImGuiCond_FirstUseEver);
   ImGui::Begin("ScanAtlas");
@@ -406,107 +508,13 @@ void drawPanel(AppState& s, GLFWwindow* win) {
   ImGui::Text("atlas %.1f MiB on the GPU", s.renderer->gpuBytes() / 1048576.0);
   drawSurfacePanel(s);
   drawGroovePanel(s);
-  if (ImGui::CollapsingHeader("Shading", ImGuiTreeNodeFlags_DefaultOpen)) {
-    const char* modes[] = {"Lambert, head light", "normals", "height ramp", "scan colour"};
-    if (ImGui::Combo("shading", &s.shadingChoice, modes, 4)) {
-      s.rs.useColor = s.shadingChoice == 3;
-      s.rs.shading = s.shadingChoice == 1 ? Shading::kNormals : s.shadingChoice == 2 ? Shading::kHeight : Shading::kLambert;
-    }
-    ImGui::Checkbox("head light", &s.rs.headLight);
-    if (!s.rs.headLight) ImGui::Checkbox("self-shadows (second cast toward the light)", &s.rs.shadows);
-    if (!s.rs.headLight) {
-      static float az = 30.f, el = 45.f;
-      bool moved = ImGui::SliderFloat("light azimuth", &az, -180.f, 180.f);
-      moved |= ImGui::SliderFloat("light elevation", &el, -89.f, 89.f);
-      (void)moved;
-      {
-        const Eigen::Vector3d up = s.rs.up.normalized();
-        const Eigen::Vector3d a = (std::abs(up.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitZ()).cross(up).normalized();
-        const Eigen::Vector3d b = up.cross(a);
-        const double ra = az * M_PI / 180, re = el * M_PI / 180;
-        s.rs.lightDir = std::cos(re) * (std::cos(ra) * b + std::sin(ra) * a) + std::sin(re) * up;
-      }
-    }
-    ImGui::Checkbox("eye-dome lighting", &s.rs.edl);
-    if (s.rs.edl) ImGui::SliderFloat("EDL strength", &s.rs.edlStrength, 0.1f, 5.f);
-    ImGui::ColorEdit3("background", s.rs.background);
-  }
-  if (ImGui::CollapsingHeader("Clip")) {
-    bool changed = ImGui::Checkbox("clip box", &s.clipBoxOn);
-    changed |= ImGui::SliderFloat3("min", s.clipBox, 0.f, 1.f);
-    changed |= ImGui::SliderFloat3("max", s.clipBox + 3, 0.f, 1.f);
-    changed |= ImGui::Checkbox("section plane", &s.sectionOn);
-    const char* axes[] = {"x", "y", "z"};
-    changed |= ImGui::Combo("axis", &s.sectionAxis, axes, 3);
-    changed |= ImGui::SliderFloat("at", &s.sectionAt, 0.f, 1.f);
-    if (changed) applyClip(s);
-  }
-  if (ImGui::CollapsingHeader("Measure", ImGuiTreeNodeFlags_DefaultOpen)) {
-    ImGui::TextWrapped("P: pick under the cursor. Double-click: set the orbit pivot.");
-    for (size_t i = 0; i < s.picks.size(); ++i)
-      ImGui::Text("%zu: %.4f %.4f %.4f", i, s.picks[i].p.x(), s.picks[i].p.y(), s.picks[i].p.z());
-    if (ImGui::Button("distance")) measure(s, "distance");
-    ImGui::SameLine();
-    if (ImGui::Button("polyline")) measure(s, "polyline");
-    ImGui::SameLine();
-    if (ImGui::Button("height")) measure(s, "height");
-    ImGui::SameLine();
-    if (ImGui::Button("clear")) s.picks.clear();
-    if (ImGui::Button("export CSV")) {
-      const std::string path = s.packPath + ".measurements.csv";
-      std::string text;
-      for (const auto& r : s.results) text += r + "\n";
-      Status st = writeFileAtomic(path, text.data(), text.size());
-      s.status = st ? "wrote " + path : st.message();
-    }
-  }
-  if (ImGui::CollapsingHeader("Views")) {
-    if (ImGui::Button("bookmark view (B)")) {
-      Status st = bookmark(s);
-      if (!st) s.status = st.message();
-    }
-    ImGui::SameLine();
-    if (ImGui::Button("screenshot (F12)")) {
-      Status st = screenshot(s, s.packPath + ".screenshot.png");
-      if (!st) s.status = st.message();
-    }
-    const std::string views = s.packPath + ".views.json";
-    if (std::filesystem::exists(views)) {
-      auto cams = readCameraPath(views, s.cc.camera().width, s.cc.camera().height);
-      if (cams) {
-        for (size_t i = 0; i < cams->size(); ++i) {
-          if (i % 6) ImGui::SameLine();
-          if (ImGui::Button(("view " + std::to_string(i + 1)).c_str())) {
-            s.cc.camera() = (*cams)[i];
-            s.pivot = (*cams)[i].target;
-          }
-        }
-      }
-    }
-    static bool vsync = true;
-    if (ImGui::Checkbox("vsync", &vsync)) glfwSwapInterval(vsync ? 1 : 0);
-  }
+  drawShadingPanel(s);
+  drawClipPanel(s);
+  drawMeasurePanel(s);
+  drawViewsPanel(s);
   if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
   ImGui::End();
-  if (s.showHelp) {
-    ImGui::SetNextWindowPos(ImVec2(360, 10), ImGuiCond_FirstUseEver);
-    ImGui::Begin("Keys (H)", &s.showHelp);
-    ImGui::TextUnformatted(
-        "left drag      orbit about the pivot\n"
-        "middle / shift-drag   pan\n"
-        "wheel          zoom toward the cursor\n"
-        "double-click   set the pivot on the surface\n"
-        "W A S D Q E    fly (shift: faster)\n"
-        "F              frame all\n"
-        "1 / 3 / 7      front / side / top view\n"
-        "P              pick a point (measure)\n"
-        "B              bookmark the view\n"
-        "F12            screenshot\n"
-        "H              this help\n"
-        "Esc            clear picks");
-    ImGui::End();
-  }
-  (void)win;
+  drawKeysWindow(s);
 }
 
 
@@ -804,7 +812,7 @@ int runViewer(const std::string& packPath, const ViewerOptions& opt) {
     glViewport(0, 0, fbw, fbh);
     s.renderer->present(fbw, fbh);
     drawGrooveOverlay(s);
-    drawPanel(s, win);
+    drawPanel(s);
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
     if (!s.pendingWindowShot.empty()) saveWindowShot(s, fbw, fbh);
