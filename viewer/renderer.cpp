@@ -1143,6 +1143,71 @@ void Renderer::readBack(const Camera& cam, unsigned what, FrameResult& out) {
   }
 }
 
+Status Renderer::prepareVisible(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel, double np,
+                                VisibleSet& vis, FrameStats& st) {
+  Gl& g = *gl_;
+  if (s.shadows && !s.headLight) SA_RETURN_IF_ERROR(ensureShadowPrograms(st.drawnMode));
+  uploadVisibility(cam, camRel, np, s, vis, st);
+  if (g.residency) {
+    if (planBudget(cam, camRel, vis, st)) uploadVisibility(cam, camRel, np, s, vis, st);  // with this frame's uploads
+  } else if (g.streamer) {
+    g.streamer->want(vis.missing);  // the visible cells it lacks, nearest first
+  }
+  if (s.countWork) glClearNamedBufferData(g.counterBuf, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, nullptr);
+  return Status::ok();
+}
+
+// Bindings 6 and 7: the drawn mode's own data (GL guarantees only 8 storage-buffer bindings).
+void Renderer::bindModeBuffers(RenderMode drawn) {
+  Gl& g = *gl_;
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, g.counterBuf);
+  if (g.mipBuf) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.mipBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, g.mipOffBuf);
+  }
+  if (drawn == RenderMode::kVdm) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.vdmEntryBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.vdmWordBuf);
+  } else if (drawn == RenderMode::kGdm || ((drawn == RenderMode::kSlices || drawn == RenderMode::kAuto) && g.gdmEntryBuf)) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);  // slices: forced cells slice gdm's voxels
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
+  } else if (drawn == RenderMode::kGrooves) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.grooveEntryBuf);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.grooveWordBuf);
+  }
+}
+
+void Renderer::clearTargets(const Camera& cam, const RenderSettings& s, unsigned readBackMask) {
+  Gl& g = *gl_;
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glViewport(0, 0, cam.width, cam.height);
+  glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_GREATER);
+  glDepthMask(GL_TRUE);
+  const float bg[4] = {s.background[0], s.background[1], s.background[2], 1.f};
+  const float depthInit[4] = {std::numeric_limits<float>::infinity(), 0, 0, 0};
+  const float zero4[4] = {0, 0, 0, 0};
+  const GLuint noCell[4] = {0, 0, 0, 0};
+  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 0, bg);
+  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 1, depthInit);
+  if (readBackMask & (kReadNormals | kReadShadow)) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
+  if (readBackMask & kReadCells) glClearNamedFramebufferuiv(g.fbo, GL_COLOR, 3, noCell);
+  const float zero = 0.f;
+  glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);
+}
+
+void Renderer::finishTimings(FrameStats& st, std::chrono::steady_clock::time_point t0) {
+  Gl& g = *gl_;
+  glFinish();
+  st.cpuMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  GLuint64 ns = 0, frags = 0;
+  glGetQueryObjectui64v(g.timeQuery, GL_QUERY_RESULT, &ns);
+  glGetQueryObjectui64v(g.fragQuery, GL_QUERY_RESULT, &frags);
+  st.gpuMs = double(ns) / 1e6;
+  st.fragments = frags;
+}
+
 Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult& out, unsigned readBackMask) {
   SA_RETURN_IF_ERROR(cam.validate());
   if (s.mode == RenderMode::kPoints && !hasPoints())
@@ -1166,48 +1231,9 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   st.drawnMode = drawnMode(s.mode);
   const bool surface = s.mode != RenderMode::kPoints;
   VisibleSet vis;
-  if (surface && s.shadows && !s.headLight) SA_RETURN_IF_ERROR(ensureShadowPrograms(st.drawnMode));
-  if (surface) uploadVisibility(cam, camRel, np, s, vis, st);
-  if (surface && g.residency) {
-    if (planBudget(cam, camRel, vis, st)) uploadVisibility(cam, camRel, np, s, vis, st);  // with this frame's uploads
-  } else if (surface && g.streamer) {
-    g.streamer->want(vis.missing);  // the visible cells it lacks, nearest first
-  }
-  if (surface && s.countWork) glClearNamedBufferData(g.counterBuf, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, nullptr);
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, g.counterBuf);
-  if (g.mipBuf) {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.mipBuf);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, g.mipOffBuf);
-  }
-  // Bindings 6 and 7: the drawn mode's own data (GL guarantees only 8 storage-buffer bindings).
-  if (st.drawnMode == RenderMode::kVdm) {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.vdmEntryBuf);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.vdmWordBuf);
-  } else if (st.drawnMode == RenderMode::kGdm ||
-             ((st.drawnMode == RenderMode::kSlices || st.drawnMode == RenderMode::kAuto) && g.gdmEntryBuf)) {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);  // slices: forced cells slice gdm's voxels
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
-  } else if (st.drawnMode == RenderMode::kGrooves) {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.grooveEntryBuf);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.grooveWordBuf);
-  }
-
-  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
-  glViewport(0, 0, cam.width, cam.height);
-  glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_GREATER);
-  glDepthMask(GL_TRUE);
-  const float bg[4] = {s.background[0], s.background[1], s.background[2], 1.f};
-  const float depthInit[4] = {std::numeric_limits<float>::infinity(), 0, 0, 0};
-  const float zero4[4] = {0, 0, 0, 0};
-  const GLuint noCell[4] = {0, 0, 0, 0};
-  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 0, bg);
-  glClearNamedFramebufferfv(g.fbo, GL_COLOR, 1, depthInit);
-  if (readBackMask & (kReadNormals | kReadShadow)) glClearNamedFramebufferfv(g.fbo, GL_COLOR, 2, zero4);
-  if (readBackMask & kReadCells) glClearNamedFramebufferuiv(g.fbo, GL_COLOR, 3, noCell);
-  const float zero = 0.f;
-  glClearNamedFramebufferfv(g.fbo, GL_DEPTH, 0, &zero);
+  if (surface) SA_RETURN_IF_ERROR(prepareVisible(cam, s, camRel, np, vis, st));
+  bindModeBuffers(st.drawnMode);
+  clearTargets(cam, s, readBackMask);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, g.cellBuf);
   glBindTextureUnit(0, g.heightTex);
   glBindTextureUnit(1, g.pageColorTex);
@@ -1221,13 +1247,7 @@ Status Renderer::render(const Camera& cam, const RenderSettings& s, FrameResult&
   if (s.edl) drawEdl(s);
   glEndQuery(g.fragTarget);
   glEndQuery(GL_TIME_ELAPSED);
-  glFinish();
-  st.cpuMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  GLuint64 ns = 0, frags = 0;
-  glGetQueryObjectui64v(g.timeQuery, GL_QUERY_RESULT, &ns);
-  glGetQueryObjectui64v(g.fragQuery, GL_QUERY_RESULT, &frags);
-  st.gpuMs = double(ns) / 1e6;
-  st.fragments = frags;
+  finishTimings(st, t0);
   if (surface && s.countWork) readCounters(st.work);
   if (surface && st.drawnMode == RenderMode::kGrooves && (!ownLists_[0].empty() || !ownLists_[1].empty())) readDeferred(st);
   out.milliseconds = st.cpuMs;

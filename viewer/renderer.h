@@ -4,6 +4,7 @@
 // baseline draws the source points as splats. Needs a current OpenGL 4.5 core context.
 #pragma once
 #include <cstdint>
+#include <chrono>
 #include <memory>
 #include <array>
 #include <string>
@@ -199,6 +200,13 @@ class Renderer {
   Status ensureTargets(int width, int height);
   void uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double nearPlane, const RenderSettings& s,
                         VisibleSet& vis, FrameStats& st);
+  // render()'s steps: the visible set (with the budget's plan or the streamer's wants), the
+  // drawn mode's storage buffers, the cleared targets, and the frame's timings once drawn.
+  Status prepareVisible(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel, double np, VisibleSet& vis,
+                        FrameStats& st);
+  void bindModeBuffers(RenderMode drawn);
+  void clearTargets(const Camera& cam, const RenderSettings& s, unsigned readBackMask);
+  void finishTimings(FrameStats& st, std::chrono::steady_clock::time_point t0);
   FrameUniforms frameUniforms(const Camera& cam, const RenderSettings& s, const Eigen::Vector3d& camRel, double np) const;
   void setCommonUniforms(unsigned program, const FrameUniforms& f, const RenderSettings& s) const;
   void drawCells(const VisibleSet& vis, const FrameUniforms& f, const RenderSettings& s, const unsigned* bufs);
