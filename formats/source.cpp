@@ -140,17 +140,24 @@ class FileAdapter : public BatchSink {
 
 namespace {
 
+// What every reader's header or count tells of a file.
+InputFile fileOf(const std::string& path, InputFormat format, uint64_t points, bool normals, bool colors, bool intensity) {
+  InputFile f;
+  f.path = path;
+  f.format = format;
+  f.points = points;
+  f.hasNormals = normals;
+  f.hasColors = colors;
+  f.hasIntensity = intensity;
+  return f;
+}
+
 // OpenMesh parses the whole file even to count: record what it delivers and replay that.
 Result<InputFile> meshFile(const std::string& path, const std::string& ext) {
   auto rec = std::make_shared<StreamRecording>(kDefaultBatchPoints);
   SA_RETURN_IF_ERROR(readMesh(path, kDefaultBatchPoints, true, *rec));
   rec->finish();
-  InputFile f;
-  f.path = path;
-  f.format = InputFormat::kMesh;
-  f.points = rec->points();
-  f.hasNormals = rec->anyNormals();
-  f.hasColors = rec->anyColors();
+  InputFile f = fileOf(path, InputFormat::kMesh, rec->points(), rec->anyNormals(), rec->anyColors(), false);
   f.hasFaces = rec->triangles() > 0;
   f.recording = std::move(rec);
   f.up = ext == ".stl" ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitY();  // STL comes from CAD: z up
@@ -160,13 +167,7 @@ Result<InputFile> meshFile(const std::string& path, const std::string& ext) {
 Result<InputFile> pcdFile(const std::string& path) {
   auto h = readPcdHeader(path);
   if (!h) return h.status();
-  InputFile f;
-  f.path = path;
-  f.format = InputFormat::kPcd;
-  f.points = h->points;
-  f.hasNormals = h->hasNormals;
-  f.hasColors = h->hasColors;
-  f.hasIntensity = h->hasIntensity;
+  InputFile f = fileOf(path, InputFormat::kPcd, h->points, h->hasNormals, h->hasColors, h->hasIntensity);
   const char* enc[] = {"ascii", "binary", "binary_compressed"};
   f.detail = std::string(enc[int(h->encoding)]) +
              (h->organized() ? ", organized " + std::to_string(h->width) + "x" + std::to_string(h->height) : ", unorganized");
@@ -184,14 +185,8 @@ Result<InputFile> dracoFile(const std::string& path) {
   DracoInfo info;
   SA_RETURN_IF_ERROR(readDraco(path, kDefaultBatchPoints, true, *rec, &info));
   rec->finish();
-  InputFile f;
-  f.path = path;
-  f.format = InputFormat::kDraco;
-  f.points = info.points;
-  f.hasNormals = info.hasNormals;
-  f.hasColors = info.hasColors;
+  InputFile f = fileOf(path, InputFormat::kDraco, info.points, info.hasNormals, info.hasColors, info.hasIntensity);
   f.hasFaces = info.triangles > 0;
-  f.hasIntensity = info.hasIntensity;
   f.hasConfidence = info.hasConfidence;
   f.hasClassification = info.hasClassification;
   f.detail = info.triangles ? "mesh, " + std::to_string(info.triangles) + " triangles" : "point cloud";
@@ -204,13 +199,7 @@ Result<InputFile> dracoFile(const std::string& path) {
 Result<InputFile> textFile(const std::string& path, const std::string& textColumns) {
   auto layout = readTextLayout(path, textColumns);
   if (!layout) return layout.status();
-  InputFile f;
-  f.path = path;
-  f.format = InputFormat::kText;
-  f.points = layout->dataLines;
-  f.hasNormals = layout->hasNormals;
-  f.hasColors = layout->hasColors;
-  f.hasIntensity = layout->hasIntensity;
+  InputFile f = fileOf(path, InputFormat::kText, layout->dataLines, layout->hasNormals, layout->hasColors, layout->hasIntensity);
   f.hasConfidence = layout->hasConfidence;
   f.hasClassification = layout->hasClassification;
   f.columns = textColumns;
