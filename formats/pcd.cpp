@@ -239,8 +239,11 @@ std::string fieldEntry(const std::string& key, const std::string& t, PcdField& f
   return {};
 }
 
+// headerLine's answer for a keyword this format does not have.
+const std::string kUnknownKeyword = "?";
+
 // One header line's words (w[0] the keyword) into `hl`: "" when understood, else what is wrong
-// ("?" for a keyword this format does not have).
+// (kUnknownKeyword for a keyword this format does not have).
 std::string headerLine(const std::vector<std::string>& w, HeaderLines& hl) {
   PcdHeader& h = hl.h;
   const std::string& key = w[0];
@@ -279,7 +282,7 @@ std::string headerLine(const std::vector<std::string>& w, HeaderLines& hl) {
     hl.data = true;
     return {};
   }
-  return "?";
+  return kUnknownKeyword;
 }
 
 // The header's lines up to and including DATA.
@@ -296,10 +299,10 @@ Status readHeaderLines(const std::string& path, BufferedReader& in, HeaderLines&
     if (w.empty() || w[0][0] == '#') continue;
     const std::string e = headerLine(w, hl);
     if (e.empty()) continue;
-    if (e == "?" && lineNo == 1)
+    if (e == kUnknownKeyword && lineNo == 1)
       return Status::badInput(path + ": not a PCD file (line 1 is neither a comment nor a PCD header keyword)");
     return Status::badInput(path + ": line " + std::to_string(lineNo) + ": " +
-                            (e == "?" ? "unknown header keyword '" + w[0].substr(0, 40) + "'" : e));
+                            (e == kUnknownKeyword ? "unknown header keyword '" + w[0].substr(0, 40) + "'" : e));
   }
   return Status::ok();
 }
