@@ -403,10 +403,10 @@ Status PackReader::checkSectionTable() {
   return Status::ok();
 }
 
-Status PackReader::checkMetaAndCells(bool compressed) {
+Status PackReader::checkMetaAndCells(bool haveHeights) {
   const SectionEntry* meta = find("META");
   const SectionEntry* cell = find("CELL");
-  if (!meta || !cell || (!find("HGHT") && !compressed))
+  if (!meta || !cell || !haveHeights)
     return Status::badInput(path_ + ": missing a required section (META, CELL, HGHT or HGTZ)");
   if (meta->size != sizeof(PackMeta)) return Status::badInput(path_ + ": META section has the wrong size");
   if (crcOf(base_ + meta->offset, meta->size) != meta->crc)
@@ -485,7 +485,7 @@ Status PackReader::open(const std::string& path, PageLoad pages) {
   SA_RETURN_IF_ERROR(checkSectionTable());
   const SectionEntry* hght = find("HGHT");
   const bool compressed = !hght && find("HGTZ");
-  SA_RETURN_IF_ERROR(checkMetaAndCells(compressed));
+  SA_RETURN_IF_ERROR(checkMetaAndCells(hght || compressed));
   SA_RETURN_IF_ERROR(compressed ? checkCodedPages() : checkRawPages(*hght));
   SA_RETURN_IF_ERROR(checkCellRecords());
   if (!compressed || pages == PageLoad::kNone) return Status::ok();

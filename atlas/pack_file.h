@@ -207,7 +207,7 @@ class PackReader {
   Status mapFile(const std::string& path);
   Status checkHeader() const;
   Status checkSectionTable();
-  Status checkMetaAndCells(bool compressed);
+  Status checkMetaAndCells(bool haveHeights);  // HGHT or HGTZ found
   Status checkCodedPages() const;
   Status checkRawPages(const SectionEntry& hght);
   Status checkCellRecords() const;
