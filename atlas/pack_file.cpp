@@ -203,7 +203,8 @@ Status PackWriter::writeRawTile(uint32_t cellIndex, const uint16_t* heights, con
 }
 
 // The tile's three layers coded (the section's layout) and appended to this process's
-// temporary; a layer the pack has but the call lacks is coded as zeros, as raw pages hold it.
+// temporary, and (storeLevels) its stored coarser levels; a layer the pack has but the call
+// lacks is coded as zeros, as raw pages hold it.
 Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals,
                                   const uint8_t* rgba) {
   const CellRecord& c = cells_[cellIndex];
@@ -211,17 +212,28 @@ Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, c
   const uint8_t* src[3] = {reinterpret_cast<const uint8_t*>(heights), normals, rgba};
   const bool present[3] = {true, (meta_.flags & kPackHasNormals) != 0, (meta_.flags & kPackHasColor) != 0};
   const TexelLayout layouts[3] = {kHeightTexels, kNormalTexels, kColorTexels};
-  for (int l = 0; l < 3; ++l) {
-    if (!present[l]) continue;
-    std::vector<uint8_t> blob;
-    {
-      const std::vector<uint8_t> t = withGutter(src[l], c.tileW, c.tileH, size_t(layouts[l].texelBytes()));
-      blob = encodeTile(t.data(), whole.w, whole, layouts[l], level_);
-    }
+  TileImage level0;  // the tile as a reader decodes it, for its coarser levels
+  level0.w = c.tileW;
+  level0.h = c.tileH;
+  auto append = [&](const std::vector<uint8_t>& blob, int layer) -> Status {
     const uint64_t at = blobEnd_.fetch_add(blob.size());
     SA_RETURN_IF_ERROR(file_.pwriteAll(blob.data(), blob.size(), at));
-    blobs_[cellIndex][size_t(l)] = BlobRef{at, blob.size(), 0, 0};
+    blobs_[cellIndex][size_t(layer)] = BlobRef{at, blob.size(), 0, 0};
+    return Status::ok();
+  };
+  for (int l = 0; l < 3; ++l) {
+    if (!present[l]) continue;
+    std::vector<uint8_t> t = withGutter(src[l], c.tileW, c.tileH, size_t(layouts[l].texelBytes()));
+    SA_RETURN_IF_ERROR(append(encodeTile(t.data(), whole.w, whole, layouts[l], level_), l));
+    if (!storeLevels_) continue;
+    if (l == 0) {
+      level0.heights.resize(t.size() / 2);
+      std::memcpy(level0.heights.data(), t.data(), t.size());
+    } else {
+      (l == 1 ? level0.normals : level0.rgba) = std::move(t);
+    }
   }
+  if (storeLevels_) SA_RETURN_IF_ERROR(append(encodeStoredLevels(level0, level_), 3));
   return Status::ok();
 }
 
@@ -261,7 +273,8 @@ Status PackWriter::finishCompressed() {
   }
   AtomicFile out;
   if (s) s = out.open(path_);
-  const size_t count = 3 + size_t((meta_.flags & kPackHasNormals) != 0) + size_t((meta_.flags & kPackHasColor) != 0);
+  const size_t count = 3 + size_t((meta_.flags & kPackHasNormals) != 0) + size_t((meta_.flags & kPackHasColor) != 0) +
+                       size_t(storeLevels_);
   uint64_t off = alignUp(sizeof(PackHeader) + count * sizeof(SectionEntry));
   std::vector<SectionEntry> sec;
   auto put = [&](const char* id, const void* data, uint64_t size) {
@@ -271,9 +284,9 @@ Status PackWriter::finishCompressed() {
   };
   put("META", &meta_, sizeof(meta_));
   put("CELL", cells_.data(), cells_.size() * sizeof(CellRecord));
-  const char* ids[3] = {"HGTZ", "NRMZ", "COLZ"};
-  const bool present[3] = {true, (meta_.flags & kPackHasNormals) != 0, (meta_.flags & kPackHasColor) != 0};
-  for (int l = 0; l < 3 && s; ++l) {
+  const char* ids[4] = {"HGTZ", "NRMZ", "COLZ", "MIPZ"};
+  const bool present[4] = {true, (meta_.flags & kPackHasNormals) != 0, (meta_.flags & kPackHasColor) != 0, storeLevels_};
+  for (int l = 0; l < 4 && s; ++l) {
     if (!present[l]) continue;
     sec.emplace_back();
     s = copySection(out, fds, l, ids[l], off, sec.back());
@@ -531,8 +544,37 @@ Status PackReader::checkTileIndexes() {
     if (sec.size() < kTileIndexHead + kTileIndexEntry * uint64_t(n) || count != n)
       return Status::badInput(path_ + ": section " + x.id + " does not index the pack's " + std::to_string(n) + " tiles");
   }
+  const std::span<const uint8_t> mips = section("MIPZ");  // optional: packs before it, pack --no-levels
+  uint32_t count = 0;
+  if (!mips.empty() && mips.size() >= 4) std::memcpy(&count, mips.data(), 4);
+  if (!mips.empty() && (mips.size() < kTileIndexHead + kTileIndexEntry * uint64_t(n) || count != n))
+    return Status::badInput(path_ + ": section MIPZ does not index the pack's " + std::to_string(n) + " tiles");
   tilesIndexed_ = true;
   return Status::ok();
+}
+
+// Cell i's blob in a compressed section whose index was checked; empty where it lies outside.
+std::span<const uint8_t> PackReader::tileBlob(const char id[4], uint32_t i) const {
+  const std::span<const uint8_t> sec = section(id);
+  uint64_t e[2];
+  std::memcpy(e, sec.data() + kTileIndexHead + kTileIndexEntry * uint64_t(i), sizeof e);
+  if (e[0] > sec.size() || e[1] > sec.size() - e[0]) return {};
+  return sec.subspan(e[0], e[1]);
+}
+
+bool PackReader::hasStoredLevels() const { return tilesIndexed_ && find("MIPZ"); }
+
+uint32_t PackReader::storedLevelAtMost(uint32_t i, uint32_t atMost) const {
+  if (!hasStoredLevels() || i >= meta_->cellCount) return 0;
+  return sa::storedLevelAtMost(tileBlob("MIPZ", i), atMost);
+}
+
+Status PackReader::decodeStoredLevel(uint32_t i, uint32_t level, TileImage& out) const {
+  if (!hasStoredLevels() || i >= meta_->cellCount) return Status::internal(path_ + ": no stored level of cell " + std::to_string(i));
+  const CellRecord& c = cells_[i];
+  const Status s = sa::decodeStoredLevel(tileBlob("MIPZ", i), c.tileW, c.tileH, level, hasNormals(), hasColor(), out);
+  if (s) return s;
+  return Status::badInput(path_ + ": section MIPZ, cell " + std::to_string(i) + ": " + s.message());
 }
 
 // Memory for the decoded pages of every compressed section (their indexes checked).
@@ -554,11 +596,8 @@ Status PackReader::reservePages() {
 // `stride` texels a row.
 Status PackReader::decodeTileOf(const char id[4], TexelLayout layout, uint8_t* out, uint32_t stride, TileRegion r,
                                 uint32_t i) const {
-  const std::span<const uint8_t> sec = section(id);
-  uint64_t e[2];
-  std::memcpy(e, sec.data() + kTileIndexHead + kTileIndexEntry * uint64_t(i), sizeof e);
-  Status s = e[0] > sec.size() || e[1] > sec.size() - e[0] ? Status::badInput("lies outside the section")
-                                                           : decodeTile(sec.subspan(e[0], e[1]), out, stride, r, layout);
+  const std::span<const uint8_t> blob = tileBlob(id, i);
+  Status s = blob.empty() ? Status::badInput("lies outside the section") : decodeTile(blob, out, stride, r, layout);
   if (s) return s;
   return Status::badInput(path_ + ": section " + std::string(id, 4) + ", tile of cell " + std::to_string(i) + ": " +
                           s.message());

@@ -15,6 +15,7 @@
 
 #include "atlas/pack_format.h"
 #include "atlas/tile_codec.h"
+#include "atlas/tile_levels.h"
 #include "common/error.h"
 #include "common/fileio.h"
 
@@ -28,7 +29,7 @@ class PackWriter {
     uint64_t offset = 0, size = 0;
     uint32_t source = 0, pad = 0;
   };
-  using CellBlobs = std::array<BlobRef, 3>;  // heights, normals, colours
+  using CellBlobs = std::array<BlobRef, 4>;  // heights, normals, colours, stored levels (MIPZ)
 
   // `cells` must already carry their tile placements; `meta` the page size and count. With
   // compressed pages (setCompressPages first) every process of a cluster pack opens its own
@@ -61,9 +62,11 @@ class PackWriter {
   }
   // Compressed pages (FORMAT.md): HGTZ, NRMZ, COLZ instead of HGHT, NRML, COLR. Before open().
   // level: zstd's for the coded tiles (kDefaultTileLevel).
-  void setCompressPages(bool on, int level = kDefaultTileLevel) {
+  // storeLevels: also a MIPZ section of each tile's coarser levels (tile_levels.h).
+  void setCompressPages(bool on, int level = kDefaultTileLevel, bool storeLevels = true) {
     compress_ = on;
     level_ = level;
+    storeLevels_ = storeLevels;
   }
   // Computes checksums, writes header, META and CELL, fsyncs and renames into place (with
   // compressed pages: the final file from the coded tiles, in cell order, and the temporaries
@@ -92,6 +95,7 @@ class PackWriter {
   std::string note_;
   bool compress_ = false;
   int level_ = kDefaultTileLevel;
+  bool storeLevels_ = true;
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
   std::atomic<uint64_t> blobEnd_{0};
   std::vector<CellBlobs> blobs_;
@@ -156,6 +160,11 @@ class PackReader {
   Status decodeCellInto(uint32_t i, uint16_t* heights, uint8_t* normals, uint8_t* rgba) const;
   // Whether tiles wait for decodeCell (compressed pages opened with PageLoad::kOnDemand).
   bool onDemand() const { return onDemand_; }
+  // Stored coarser levels (MIPZ, tile_levels.h): whether the pack has them (compressed pages
+  // opened with tiles), the finest a cell stores no finer than atMost (0: none), and one decoded.
+  bool hasStoredLevels() const;
+  uint32_t storedLevelAtMost(uint32_t i, uint32_t atMost) const;
+  Status decodeStoredLevel(uint32_t i, uint32_t level, TileImage& out) const;
   // Checks the checksums of the large sections too (reads every byte).
   Status verifyPages() const;
 
@@ -213,6 +222,7 @@ class PackReader {
   Status checkCellRecords() const;
   Status checkTileIndexes();
   Status reservePages();
+  std::span<const uint8_t> tileBlob(const char id[4], uint32_t i) const;
   Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* out, uint32_t stride, TileRegion r, uint32_t i) const;
   Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const;
   Status decodePages(const char id[4], TexelLayout layout, uint8_t* pages) const;

@@ -85,6 +85,23 @@ std::vector<PageBytes> pageBytes(const PackReader& pack) {
   return out;
 }
 
+// The tiles' stored coarser levels (MIPZ): what they cost and what they are for.
+std::string storedLevelsText() {
+  std::string t;
+  for (uint32_t l : kStoredLevels) t += (t.empty() ? "" : ", ") + std::to_string(l);
+  return t;
+}
+void printStoredLevels(const PackReader& pack) {
+  if (!pack.compressedPages()) return;
+  const uint64_t bytes = pack.section("MIPZ").size();
+  if (!bytes) {
+    std::printf("mips      none stored (pack --no-levels, or an older scanatlas): a far view under --gpu-budget decodes whole tiles\n");
+    return;
+  }
+  std::printf("mips      level %s of each tile stored (MIPZ), %.2f MiB, %.1f%% of the file: a far view decodes no tile\n",
+              storedLevelsText().c_str(), double(bytes) / 1048576.0, 100.0 * double(bytes) / double(std::max<uint64_t>(1, pack.fileBytes())));
+}
+
 struct TexelRange {
   double min = 0, median = 0, max = 0;
 };
@@ -289,6 +306,11 @@ void printPackJson(const PackReader& pack, const PackSummary& sum) {
     first = false;
   }
   std::printf("}");
+  if (pack.compressedPages() && !pack.section("MIPZ").empty())
+    std::printf(", \"stored_levels\": {\"levels\": [%s], \"bytes\": %llu}", storedLevelsText().c_str(),
+                (unsigned long long)pack.section("MIPZ").size());
+  else
+    std::printf(", \"stored_levels\": null");
   std::printf(", \"modes\": [");
   bool firstMode = true;
   for (const ModeInfo& mi : allModes()) {
@@ -349,6 +371,7 @@ void printPackText(const PackReader& pack, const PackSummary& sum) {
                 double(raw) / 1048576.0);
   else
     std::printf("; raw (packed with --raw-pages or before compression)\n");
+  printStoredLevels(pack);
   std::printf("timings  ");
   if (m.seconds[5] == 0) std::printf(" not recorded (packed with --reproducible)");
   for (int i = 0; i < 6 && m.seconds[5] != 0; ++i)

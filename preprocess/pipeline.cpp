@@ -1194,13 +1194,14 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 11;  // 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 12;  // 12: stored coarser levels (MIPZ); 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
-      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d %d",
+      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d %d %d",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
       o.texelPerSpacing, o.coverageRadius, o.splatRadius, o.outlierRatio, int(o.smooth), int(o.asPoints), o.up.x(),
       o.up.y(), o.up.z(), o.octree.maxDepth, o.octree.minSplitPoints, o.octree.maxAngleDeg, o.octree.outlierFraction,
-      o.normalNeighbours, o.maxPageSize, int(o.compressPages), o.heightStep, o.normalTolerance, o.colourTolerance, o.pageLevel);
+      o.normalNeighbours, o.maxPageSize, int(o.compressPages), o.heightStep, o.normalTolerance, o.colourTolerance, o.pageLevel,
+      int(o.storeLevels));
   XXH3_64bits_update(st, opts, size_t(n));
   for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);
@@ -1305,7 +1306,7 @@ Status shareRootPhases(PackJob& job, const Status& s) {
 // Rank 0 creates the output's temporary; the other ranks write their tiles into it.
 Status openWriter(const PackJob& job, const std::string& outPath, PackWriter& writer) {
   const std::string note = makeNote(job);
-  writer.setCompressPages(job.opt.compressPages, job.opt.pageLevel);
+  writer.setCompressPages(job.opt.compressPages, job.opt.pageLevel, job.opt.storeLevels);
   // Compressed pages: every rank codes its tiles into a temporary of its own (joinTiles).
   const bool own = job.opt.compressPages || Cluster::rank() == 0;
   Status s = own ? writer.open(outPath, job.meta, job.records, note) : Status::ok();

@@ -41,6 +41,7 @@ struct PackOptions {
   bool reproducible = false;      // no timings in META: the same input and options give the same bytes
   bool compressPages = true;      // pages coded losslessly per tile (HGTZ, NRMZ, COLZ) instead of raw
   int pageLevel = kDefaultTileLevel;  // zstd level of the coded tiles (1..kMaxTileLevel)
+  bool storeLevels = true;        // compressed pages: each tile's levels 2 and 4 stored too (MIPZ)
   // What the pages keep (FORMAT.md, "Precision"): heights rounded to steps of at most this many
   // texels (0: every bit of the 16-bit code); normals and colours set to the page coder's
   // pyramid rebuild where that moves them by at most these degrees and grey levels (0: kept).

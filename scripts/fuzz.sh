@@ -57,6 +57,8 @@ if [ -x build/scanatlas ]; then
   printf 'ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 0.1\n' > "$seeds/tiny.ply"
   ./build/scanatlas pack "$seeds/tiny.ply" -o "$seeds/pack/tiny.hfa" -q --force
   ./build/scanatlas pack "$seeds/tiny.ply" -o "$seeds/pack/tiny_raw.hfa" -q --force --raw-pages
+  # One cell of about 37 x 35 texels: its level 4 stored (MIPZ).
+  ./build/scanatlas pack "$seeds/ply/tri.ply" -o "$seeds/pack/tri_levels.hfa" -q --force --texel-size 0.03
   ./build/scanatlas convert "$seeds/tiny.ply" -o "$seeds/draco/tiny.drc" -q
   ./build/scanatlas convert "$seeds/tiny.ply" -o "$seeds/draco/tiny_lossless.drc" --quantization 0 -q
   ./build/scanatlas convert "$seeds/ply/tri.ply" -o "$seeds/draco/tri_mesh.drc" -q

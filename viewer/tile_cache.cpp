@@ -14,110 +14,41 @@ uint32_t nextPow2(uint32_t v) {
   return p;
 }
 
-size_t at(const TileImage& t, int i, int j) { return size_t(j + 1) * (t.w + 2) + size_t(i + 1); }
-
-// The gutter: the edge texels repeated (FORMAT.md).
-void fillGutter(TileImage& t, bool normals, bool rgba) {
-  auto copy = [&](int fi, int fj, int ti, int tj) {
-    t.heights[at(t, ti, tj)] = t.heights[at(t, fi, fj)];
-    if (normals) std::copy_n(&t.normals[at(t, fi, fj) * kNormalBytes], kNormalBytes, &t.normals[at(t, ti, tj) * kNormalBytes]);
-    if (rgba) std::copy_n(&t.rgba[at(t, fi, fj) * 4], 4, &t.rgba[at(t, ti, tj) * 4]);
-  };
-  const int W = int(t.w), H = int(t.h);
-  for (int i = 0; i < W; ++i) {
-    copy(i, 0, i, -1);
-    copy(i, H - 1, i, H);
-  }
-  for (int j = -1; j <= H; ++j) {
-    copy(0, std::clamp(j, 0, H - 1), -1, j);
-    copy(W - 1, std::clamp(j, 0, H - 1), W, j);
-  }
-}
-
-TileImage blank(uint32_t w, uint32_t h, bool normals, bool rgba) {
-  TileImage t;
-  t.w = w;
-  t.h = h;
-  const size_t n = size_t(w + 2) * (h + 2);
-  t.heights.assign(n, 0);
-  if (normals) t.normals.assign(n * kNormalBytes, 0);
-  if (rgba) t.rgba.assign(n * 4, 0);
-  return t;
-}
-
-// The fine texels under coarse texel i of n across a tile of w (in fine texels, the coarse
-// texel spans [i w / n, (i + 1) w / n)): their first index and each one's overlap (at most 3).
-struct Span {
-  uint32_t first = 0, count = 0;
-  double weight[3] = {0, 0, 0};
-};
-Span span(uint32_t i, uint32_t n, uint32_t w) {
-  const double a = double(i) * w / n, b = double(i + 1) * w / n;
-  Span s;
-  s.first = uint32_t(std::floor(a));
-  for (uint32_t j = s.first; j < w && double(j) < b && s.count < 3; ++j)
-    s.weight[s.count++] = std::min(b, double(j + 1)) - std::max(a, double(j));
-  return s;
-}
-
 }  // namespace
-
-// A plain 2 x 2 mean would drift toward the far edge of an odd-sized tile by up to a fine texel
-// at level 1 and about 3 at level 3 (the dragon's depth error p95 under a quarter budget 3.6
-// texels; 1.5 with footprints).
-TileImage coarserLevel(const TileImage& s) {
-  const bool nn = !s.normals.empty(), cc = !s.rgba.empty();
-  TileImage t = blank((s.w + 1) / 2, (s.h + 1) / 2, nn, cc);
-  std::vector<Span> su(t.w), sv(t.h);
-  for (uint32_t i = 0; i < t.w; ++i) su[i] = span(i, t.w, s.w);
-  for (uint32_t j = 0; j < t.h; ++j) sv[j] = span(j, t.h, s.h);
-  for (uint32_t j = 0; j < t.h; ++j)
-    for (uint32_t i = 0; i < t.w; ++i) {
-      double h = 0, n[3] = {0, 0, 0}, c[4] = {0, 0, 0, 0}, covered = 0, area = 0;
-      const Span &a = su[i], &b = sv[j];
-      for (uint32_t y = 0; y < b.count; ++y)
-        for (uint32_t x = 0; x < a.count; ++x) {
-          const double wt = a.weight[x] * b.weight[y];
-          area += wt;
-          const size_t f = at(s, int(a.first + x), int(b.first + y));
-          if (s.heights[f] == 0) continue;
-          covered += wt;
-          h += wt * s.heights[f];
-          if (nn) {
-            double d[3];
-            decodeNormal(&s.normals[f * kNormalBytes], d);
-            for (int q = 0; q < 3; ++q) n[q] += wt * d[q];
-          }
-          if (cc)
-            for (int q = 0; q < 4; ++q) c[q] += wt * s.rgba[f * 4 + q];
-        }
-      if (covered <= 0 || 2 * covered < area) continue;
-      const size_t o = at(t, int(i), int(j));
-      t.heights[o] = uint16_t(std::clamp(std::lround(h / covered), 1L, 65535L));
-      if (nn) {
-        const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        if (len > 0) encodeNormal(n[0] / len, n[1] / len, n[2] / len, &t.normals[o * kNormalBytes]);
-        else std::copy_n(&s.normals[at(s, int(a.first), int(b.first)) * kNormalBytes], kNormalBytes, &t.normals[o * kNormalBytes]);
-      }
-      if (cc)
-        for (int q = 0; q < 4; ++q) t.rgba[o * 4 + q] = uint8_t(std::lround(c[q] / covered));
-    }
-  fillGutter(t, nn, cc);
-  return t;
-}
 
 Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std::vector<TileImage>& out) {
   const CellRecord& c = pack.cells()[cell];
   const bool nn = pack.hasNormals(), cc = pack.hasColor();
   out.clear();
-  out.push_back(blank(c.tileW, c.tileH, nn, cc));
-  TileImage& t = out.back();
-  const Status s = pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr);
-  if (!s) t = blank(c.tileW, c.tileH, nn, cc);  // a damaged tile: every level uncovered
+  // Where the pack stores a level no finer than the first one kept, the levels start there
+  // (the finer ones sized, without texels); else from the decoded tile. A stored level that
+  // fails to decode falls back to the tile.
+  uint32_t stored = pack.storedLevelAtMost(cell, keepFrom);
+  Status levelError = Status::ok();
+  if (stored > 0) {
+    for (uint32_t l = 0; l < stored; ++l) {
+      uint32_t w, h;
+      levelDims(c.tileW, c.tileH, l, w, h);
+      out.push_back(TileImage{w, h, {}, {}, {}});
+    }
+    out.emplace_back();
+    levelError = pack.decodeStoredLevel(cell, stored, out.back());
+    if (!levelError) {
+      out.clear();
+      stored = 0;
+    }
+  }
+  Status s = Status::ok();
+  if (out.empty()) {
+    out.push_back(blankTile(c.tileW, c.tileH, nn, cc));
+    TileImage& t = out.back();
+    s = pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr);
+    if (!s) t = blankTile(c.tileW, c.tileH, nn, cc);  // a damaged tile: every level uncovered
+  }
   while (out.back().w > 1 || out.back().h > 1) out.push_back(coarserLevel(out.back()));
-  for (uint32_t k = 0; k < std::min<size_t>(keepFrom, out.size()); ++k)
+  for (uint32_t k = stored; k < std::min<size_t>(keepFrom, out.size()); ++k)
     out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
-  return s;
+  return s ? levelError : s;
 }
 
 uint64_t atlasBytes(const PackReader& pack) {

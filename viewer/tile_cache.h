@@ -13,30 +13,18 @@
 #include <Eigen/Core>
 
 #include "atlas/pack_file.h"
+#include "atlas/tile_levels.h"
 
 namespace sa {
 
-// One level of a cell's tile with its one-texel gutter (the edge repeated), row-major,
-// (w + 2) x (h + 2) texels.
-struct TileImage {
-  uint32_t w = 0, h = 0;  // interior texels
-  std::vector<uint16_t> heights;
-  std::vector<uint8_t> normals;  // kNormalBytes a texel, empty when the pack has none
-  std::vector<uint8_t> rgba;     // empty when the pack has no colour
-};
-
 // Levels 0, 1, 2, ... of cell i's tile, down to one texel on the longer side, level 0 decoded
 // from the pack (PackReader::decodeCellInto: any PageLoad but kNone) and each coarser one by
-// coarserLevel. Levels under keepFrom are left empty (their size set, no texels): what is not
-// needed is not kept. A tile that fails to decode gets its levels all uncovered (the cell never
-// draws) and the error is returned.
+// coarserLevel; where the pack stores a level between 1 and keepFrom (MIPZ), the finest such
+// is decoded instead of the tile (the same texels: the writer built it by coarserLevel too).
+// Levels under keepFrom are left empty (their size set, no texels): what is not needed is not
+// kept. A tile that fails to decode gets its levels all uncovered (the cell never draws) and
+// the error is returned; a stored level that fails is built from the tile, and its error returned.
 Status buildLevels(const PackReader& pack, uint32_t i, uint32_t keepFrom, std::vector<TileImage>& out);
-// The next level of t: ceil(w / 2) x ceil(h / 2) texels over the same box (the shader spreads a
-// level's texels evenly over the cell's box), each the area average of the texels under its
-// footprint, which is 2 w / (w + 1) texels wide where w is odd. Covered where at least half the
-// footprint is (coverage edges stay where they were); height and colour the covered texels'
-// weighted mean, the normal their normalized weighted mean.
-TileImage coarserLevel(const TileImage& t);
 // The bytes the pack's pages take on the GPU when uploaded whole.
 uint64_t atlasBytes(const PackReader& pack);
 // This machine's physical memory (0 where unknown).

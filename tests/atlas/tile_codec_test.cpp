@@ -6,7 +6,9 @@
 #include <cstring>
 #include <random>
 
+#include "atlas/pack_format.h"
 #include "atlas/tile_codec.h"
+#include "atlas/tile_levels.h"
 
 namespace sa {
 namespace {
@@ -165,6 +167,95 @@ TEST(TileCodec, DamagedPyramidBlobsAreErrors) {
   EXPECT_FALSE(decodeTile(std::span(blob).first(4), out.data(), w + 2, r, kNormalTexels).isOk()) << "the tag alone";
   const Status s = decodeTile(blob, out.data(), 3, {0, 0, 3, 3}, kNormalTexels);
   EXPECT_FALSE(s.isOk());
+}
+
+
+// A w x h tile with its gutter: a height ramp with noise, holes where `hole` says, random unit
+// normals and colours on the covered texels; the gutter repeats the edge (as packs store it).
+TileImage randomTile(uint32_t w, uint32_t h, std::mt19937& rng, double hole) {
+  TileImage t = blankTile(w, h, true, true);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (uint32_t j = 0; j < h; ++j)
+    for (uint32_t i = 0; i < w; ++i) {
+      if (u(rng) < hole) continue;
+      const size_t o = size_t(j + 1) * (w + 2) + i + 1;
+      t.heights[o] = uint16_t(1 + std::min(65000.0, 300.0 * i + 200.0 * j + 400 * u(rng)));
+      encodeNormal(u(rng) - 0.5, u(rng) - 0.5, 1.0, &t.normals[o * kNormalBytes]);
+      for (int c = 0; c < 4; ++c) t.rgba[o * 4 + c] = uint8_t(rng());
+    }
+  // The gutter: edge texels repeated.
+  auto copy = [&](uint32_t fi, uint32_t fj, uint32_t ti, uint32_t tj) {
+    const size_t f = size_t(fj) * (w + 2) + fi, d = size_t(tj) * (w + 2) + ti;
+    t.heights[d] = t.heights[f];
+    std::memcpy(&t.normals[d * kNormalBytes], &t.normals[f * kNormalBytes], kNormalBytes);
+    std::memcpy(&t.rgba[d * 4], &t.rgba[f * 4], 4);
+  };
+  for (uint32_t i = 1; i <= w; ++i) copy(i, 1, i, 0), copy(i, h, i, h + 1);
+  for (uint32_t j = 0; j < h + 2; ++j) copy(1, std::clamp<uint32_t>(j, 1, h), 0, j), copy(w, std::clamp<uint32_t>(j, 1, h), w + 1, j);
+  return t;
+}
+
+// What a pack stores beside a tile (MIPZ) decodes to the very level coarserLevel builds from the
+// tile: a reader may take either. Tiles too small to have the level store none.
+TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
+  std::mt19937 rng(11);
+  const uint32_t sizes[][2] = {{1, 1}, {15, 9}, {16, 16}, {17, 3}, {37, 21}, {70, 70}, {129, 64}, {300, 5}};
+  for (const auto& sz : sizes)
+    for (double hole : {0.0, 0.3, 0.9}) {
+      const TileImage t = randomTile(sz[0], sz[1], rng, hole);
+      const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel);
+      const uint32_t levels = levelCount(sz[0], sz[1]);
+      std::vector<TileImage> built{t};
+      while (built.back().w > 1 || built.back().h > 1) built.push_back(coarserLevel(built.back()));
+      ASSERT_EQ(built.size(), levels);
+      uint32_t stored = 0;
+      for (uint32_t l : kStoredLevels) {
+        if (l >= levels) {
+          EXPECT_EQ(storedLevelAtMost(blob, l), stored) << sz[0] << "x" << sz[1] << ": no level " << l;
+          continue;
+        }
+        stored = l;
+        EXPECT_EQ(storedLevelAtMost(blob, l), l);
+        EXPECT_EQ(storedLevelAtMost(blob, l + 3), l);
+        EXPECT_EQ(storedLevelAtMost(blob, l - 1), 0u);
+        TileImage got;
+        ASSERT_TRUE(decodeStoredLevel(blob, sz[0], sz[1], l, true, true, got).isOk());
+        EXPECT_EQ(got.w, built[l].w);
+        EXPECT_EQ(got.h, built[l].h);
+        EXPECT_EQ(got.heights, built[l].heights) << sz[0] << "x" << sz[1] << " level " << l << " holes " << hole;
+        EXPECT_EQ(got.normals, built[l].normals);
+        EXPECT_EQ(got.rgba, built[l].rgba);
+        // The pack's channels must match the blob's.
+        EXPECT_FALSE(decodeStoredLevel(blob, sz[0], sz[1], l, false, true, got).isOk());
+        EXPECT_FALSE(decodeStoredLevel(blob, sz[0] + 16, sz[1], l, true, true, got).isOk()) << "another tile's size";
+      }
+      if (!stored) EXPECT_EQ(blob.size(), 4u) << "a tile with none of the levels stores a count of 0";
+    }
+}
+
+// A damaged blob is an error naming what is wrong, never a crash or a read past it.
+TEST(TileLevels, DamagedStoredLevelsAreErrors) {
+  std::mt19937 rng(5);
+  const TileImage t = randomTile(64, 48, rng, 0.1);
+  const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel);
+  const uint32_t l = kStoredLevels[0];
+  TileImage got;
+  ASSERT_TRUE(decodeStoredLevel(blob, 64, 48, l, true, true, got).isOk());
+  EXPECT_FALSE(decodeStoredLevel(blob, 64, 48, l + 1, true, true, got).isOk()) << "a level not stored";
+  for (size_t cut : {size_t(0), size_t(3), size_t(7), blob.size() / 2, blob.size() - 1}) {
+    const std::span<const uint8_t> part(blob.data(), cut);
+    EXPECT_FALSE(decodeStoredLevel(part, 64, 48, l, true, true, got).isOk()) << "cut at " << cut;
+    EXPECT_EQ(storedLevelAtMost(part, 31), 0u) << "a header whose frame does not fit";
+  }
+  std::vector<uint8_t> bad = blob;
+  bad[0] = 200;  // the count
+  EXPECT_FALSE(decodeStoredLevel(bad, 64, 48, l, true, true, got).isOk());
+  EXPECT_EQ(storedLevelAtMost(bad, 31), 0u);
+  for (size_t k = 12; k < blob.size(); k += 7) {  // the frame: an error or some texels, never a crash
+    bad = blob;
+    bad[k] ^= 0x5a;
+    (void)decodeStoredLevel(bad, 64, 48, l, true, true, got);
+  }
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "preprocess/pipeline.h"
 #include "viewer/eval.h"
 #include "viewer/renderer.h"
+#include "viewer/tile_cache.h"
 #include "viewer/tile_streamer.h"
 
 namespace sa {
@@ -26,6 +27,17 @@ std::string packAutzen(const test::TempDir& d) {
   PackSummary sum;
   EXPECT_TRUE(packInput(*in, d.file("a.hfa"), PackOptions{}, nullptr, sum).isOk());
   return d.file("a.hfa");
+}
+
+// autzen packed without its tiles' stored levels (pack --no-levels), as n.hfa.
+std::string packAutzenWithoutLevels(const test::TempDir& d) {
+  auto in = InputSet::open({test::sharedData("lidar/autzen_trim.las")});
+  EXPECT_TRUE(in.isOk());
+  PackOptions opt;
+  opt.storeLevels = false;
+  PackSummary sum;
+  EXPECT_TRUE(packInput(*in, d.file("n.hfa"), opt, nullptr, sum).isOk());
+  return d.file("n.hfa");
 }
 
 // Every decoded cell taken from the streamer, waiting for the rest.
@@ -137,7 +149,107 @@ TEST(TileStreamer, OnRequestOnlyTheCellsAskedForAndAgainOnceReleased) {
   EXPECT_FALSE(meta.decodeCellInto(0, t.data(), nullptr, nullptr).isOk());
 }
 
+// Stored levels (MIPZ) on a real scan: the levels a far view asks for are the ones built from
+// the tiles, texel for texel, and come without reading the tiles at all (a copy whose coded
+// heights are overwritten still gives them; its level 0 is an error).
+TEST(StoredLevels, AFarViewsLevelsAreTheTilesOwnAndNeedNoTile) {
+  test::TempDir d;
+  const std::string withPath = packAutzen(d), withoutPath = packAutzenWithoutLevels(d);
+  PackReader with, without;
+  ASSERT_TRUE(with.open(withPath, PageLoad::kTiles).isOk());
+  ASSERT_TRUE(without.open(withoutPath, PageLoad::kTiles).isOk());
+  EXPECT_TRUE(with.hasStoredLevels());
+  EXPECT_FALSE(without.hasStoredLevels());
+  const double ratio = double(std::filesystem::file_size(withPath)) / double(std::filesystem::file_size(withoutPath));
+  std::printf("autzen: pack %.4fx the bytes with stored levels (MIPZ %zu bytes)\n", ratio, with.section("MIPZ").size());
+  EXPECT_GT(ratio, 1.0);
+  EXPECT_LT(ratio, 1.15);
+  const uint32_t far = kStoredLevels[0];
+  std::vector<uint32_t> storing;
+  for (uint32_t i = 0; i < with.cells().size(); ++i) {
+    const CellRecord& c = with.cells()[i];
+    for (uint32_t keep : {far, far + 2}) {
+      std::vector<TileImage> a, b;
+      ASSERT_TRUE(buildLevels(with, i, keep, a).isOk());
+      ASSERT_TRUE(buildLevels(without, i, keep, b).isOk());
+      ASSERT_EQ(a.size(), b.size());
+      for (size_t k = 0; k < a.size(); ++k) {
+        ASSERT_EQ(a[k].w, b[k].w);
+        ASSERT_EQ(a[k].heights, b[k].heights) << "cell " << i << " level " << k << " kept from " << keep;
+        ASSERT_EQ(a[k].normals, b[k].normals) << "cell " << i << " level " << k;
+        ASSERT_EQ(a[k].rgba, b[k].rgba) << "cell " << i << " level " << k;
+      }
+    }
+    const bool has = levelCount(c.tileW, c.tileH) > far;
+    EXPECT_EQ(with.storedLevelAtMost(i, 30), has ? far : 0u) << "cell " << i;
+    EXPECT_EQ(with.storedLevelAtMost(i, far - 1), 0u);
+    if (has) storing.push_back(i);
+  }
+  std::printf("%zu of %zu cells store level %u\n", storing.size(), with.cells().size(), far);
+  ASSERT_GT(storing.size(), 20u);
+  // A copy with every coded height tile overwritten (the index kept).
+  std::ifstream in(withPath, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  PackHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  for (uint32_t k = 0; k < h.sectionCount; ++k) {
+    SectionEntry e;
+    std::memcpy(&e, bytes.data() + h.sectionTableOffset + k * sizeof e, sizeof e);
+    if (std::memcmp(e.id, "HGTZ", 4) != 0) continue;
+    const uint64_t index = 8 + 16 * uint64_t(with.cells().size());
+    std::fill(bytes.begin() + long(e.offset + index), bytes.begin() + long(e.offset + e.size), char(0xa5));
+  }
+  std::ofstream(d.file("damaged.hfa"), std::ios::binary).write(bytes.data(), long(bytes.size()));
+  PackReader damaged;
+  ASSERT_TRUE(damaged.open(d.file("damaged.hfa"), PageLoad::kTiles).isOk());
+  for (uint32_t i : storing) {
+    std::vector<TileImage> a, b;
+    ASSERT_TRUE(buildLevels(damaged, i, far, a).isOk()) << "cell " << i << ": the far levels need no tile";
+    ASSERT_TRUE(buildLevels(without, i, far, b).isOk());
+    for (size_t k = far; k < a.size(); ++k) ASSERT_EQ(a[k].heights, b[k].heights) << "cell " << i << " level " << k;
+    const Status s = buildLevels(damaged, i, 0, a);
+    EXPECT_FALSE(s.isOk()) << "cell " << i << ": level 0 reads the damaged tile";
+    EXPECT_NE(s.message().find("HGTZ"), std::string::npos) << s.message();
+  }
+}
+
 class StreamingTest : public test::GlTest {};
+
+// The same far views of autzen under a --gpu-budget, from a pack with stored levels and one
+// without: the same image, bit for bit.
+TEST_F(StreamingTest, StoredLevelsDrawTheSameBudgetImage) {
+  test::TempDir d;
+  PackReader with, without;
+  ASSERT_TRUE(with.open(packAutzen(d), PageLoad::kTiles).isOk());
+  ASSERT_TRUE(without.open(packAutzenWithoutLevels(d), PageLoad::kTiles).isOk());
+  Renderer rw, rn;
+  const uint64_t budget = uint64_t(4) << 20;
+  ASSERT_TRUE(rw.init(with, true, budget).isOk());
+  ASSERT_TRUE(rn.init(without, true, budget).isOk());
+  const Eigen::Vector3d o(with.meta().origin), lo = o + Eigen::Vector3d(with.meta().boundsMin),
+      hi = o + Eigen::Vector3d(with.meta().boundsMax);
+  for (int v = 0; v < 3; ++v) {
+    Camera cam;
+    cam.target = (lo + hi) / 2;
+    const double a = v * 2.1;
+    cam.eye = cam.target + Eigen::Vector3d(std::cos(a) * 0.8, std::sin(a) * 0.8, 0.7) * (0.8 + 1.2 * v) * (hi - lo).norm();
+    cam.up = Eigen::Vector3d::UnitZ();
+    cam.width = cam.height = 96;
+    FrameResult fa, fb;
+    for (Renderer* r : {&rw, &rn}) {
+      FrameResult& f = r == &rw ? fa : fb;
+      for (int frames = 0; frames < 10000 && (frames == 0 || r->tilesPending()); ++frames)
+        ASSERT_TRUE(r->render(cam, RenderSettings{}, f, kReadColor | kReadDepth).isOk());
+      ASSERT_FALSE(r->tilesPending()) << "view " << v;
+      ASSERT_TRUE(r->render(cam, RenderSettings{}, f, kReadColor | kReadDepth).isOk());
+    }
+    EXPECT_GT(fa.cellsDrawn + fa.stats.splats, 50u);
+    EXPECT_EQ(fa.color.rgba, fb.color.rgba) << "view " << v;
+    ASSERT_EQ(fa.depth.size(), fb.depth.size());
+    EXPECT_EQ(std::memcmp(fa.depth.data(), fb.depth.data(), fa.depth.size() * sizeof(float)), 0) << "view " << v;
+    EXPECT_EQ(rw.streamError(), "");
+  }
+}
 
 // A real scan (autzen LAS, compressed pages): frames while tiles stream draw only resident
 // cells and say how many visible cells they lack; once streaming ends the image is the one a
