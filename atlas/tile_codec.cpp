@@ -352,7 +352,7 @@ Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWid
 std::vector<uint8_t> encodeTilePlanes(std::span<const TilePlane> planes, int level) {
   std::vector<uint8_t> all;
   for (const TilePlane& p : planes) {
-    const std::vector<uint8_t> r = residualPlanes(p.texels, p.w, {0, 0, p.w, p.h}, p.layout);
+    const std::vector<uint8_t> r = residualPlanes(p.texels, p.stride, p.r, p.layout);
     all.insert(all.end(), r.begin(), r.end());
   }
   return compress(all, level);
@@ -360,13 +360,13 @@ std::vector<uint8_t> encodeTilePlanes(std::span<const TilePlane> planes, int lev
 
 Status decodeTilePlanes(std::span<const uint8_t> blob, std::span<const TilePlane> planes) {
   size_t want = 0;
-  for (const TilePlane& p : planes) want += size_t(p.w) * p.h * p.layout.texelBytes();
+  for (const TilePlane& p : planes) want += size_t(p.r.w) * p.r.h * p.layout.texelBytes();
   std::vector<uint8_t> all;
   SA_RETURN_IF_ERROR(decompressExactly(blob, want, all));
   size_t at = 0;
   for (const TilePlane& p : planes) {
-    applyPlanes(all.data() + at, p.texels, p.w, {0, 0, p.w, p.h}, p.layout);
-    at += size_t(p.w) * p.h * p.layout.texelBytes();
+    applyPlanes(all.data() + at, p.texels, p.stride, p.r, p.layout);
+    at += size_t(p.r.w) * p.r.h * p.layout.texelBytes();
   }
   return Status::ok();
 }

@@ -66,12 +66,13 @@ std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileReg
 // Decodes `blob` into region r of `page`; an error when the blob is not a tile of that size.
 Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout);
 
-// Several small tight tiles (w x h texels, row-major, no gutter) coded as one zstd frame, their
-// residual planes one after another: what a cell's stored levels share instead of a frame each
-// (a frame costs about 10 bytes, a 6 x 6 height tile about 50).
+// Several small regions coded as one zstd frame, their residual planes one after another: what
+// a cell's stored levels share instead of a frame each (a frame costs about 10 bytes, a 6 x 6
+// height tile about 50).
 struct TilePlane {
-  uint8_t* texels;  // read by encodeTilePlanes, written by decodeTilePlanes
-  uint32_t w = 0, h = 0;
+  uint8_t* texels;       // read by encodeTilePlanes, written by decodeTilePlanes
+  uint32_t stride = 0;   // texels a row
+  TileRegion r;          // the region coded
   TexelLayout layout;
 };
 std::vector<uint8_t> encodeTilePlanes(std::span<const TilePlane> planes, int level = kDefaultTileLevel);

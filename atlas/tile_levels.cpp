@@ -70,40 +70,14 @@ bool readEntries(std::span<const uint8_t> blob, std::vector<LevelEntry>& entries
   return true;
 }
 
-// A level's channels without the gutter, tight (what a stored level's frame holds): heights,
-// then normals and colours where the tile has them.
-struct Interior {
-  std::vector<uint8_t> bytes[3];
-  std::vector<TilePlane> planes;
-};
-constexpr TexelLayout kLayouts[3] = {kHeightTexels, kNormalTexels, kColorTexels};
-Interior interiorPlanes(uint32_t w, uint32_t h, bool normals, bool rgba) {
-  Interior in;
-  const bool present[3] = {true, normals, rgba};
-  for (int c = 0; c < 3; ++c) {
-    if (!present[c]) continue;
-    in.bytes[c].assign(size_t(w) * h * size_t(kLayouts[c].texelBytes()), 0);
-  }
-  for (int c = 0; c < 3; ++c)
-    if (present[c]) in.planes.push_back(TilePlane{in.bytes[c].data(), w, h, kLayouts[c]});
-  return in;
-}
-uint8_t* channel(TileImage& t, int c) {
-  return c == 0 ? reinterpret_cast<uint8_t*>(t.heights.data()) : c == 1 ? t.normals.data() : t.rgba.data();
-}
-// Copies between the image's interior and the tight planes (toImage: into the image).
-void copyInterior(TileImage& t, Interior& in, bool toImage) {
-  for (int c = 0; c < 3; ++c) {
-    if (in.bytes[c].empty()) continue;
-    const size_t tb = size_t(kLayouts[c].texelBytes()), row = size_t(t.w) * tb;
-    uint8_t* img = channel(t, c);
-    for (uint32_t j = 0; j < t.h; ++j) {
-      uint8_t* a = img + at(t, 0, int(j)) * tb;
-      uint8_t* b = in.bytes[c].data() + j * row;
-      if (toImage) std::memcpy(a, b, row);
-      else std::memcpy(b, a, row);
-    }
-  }
+// A level's channels as one frame holds them: the interior of each (heights, then normals and
+// colours where the image has them), without the gutter.
+std::vector<TilePlane> interiorPlanes(TileImage& t) {
+  const TileRegion inside{1, 1, t.w, t.h};
+  std::vector<TilePlane> planes{{reinterpret_cast<uint8_t*>(t.heights.data()), t.w + 2, inside, kHeightTexels}};
+  if (!t.normals.empty()) planes.push_back({t.normals.data(), t.w + 2, inside, kNormalTexels});
+  if (!t.rgba.empty()) planes.push_back({t.rgba.data(), t.w + 2, inside, kColorTexels});
+  return planes;
 }
 
 }  // namespace
@@ -182,18 +156,15 @@ uint32_t levelCount(uint32_t w, uint32_t h) {
   return n;
 }
 
-std::vector<uint8_t> encodeStoredLevels(const TileImage& level0, int zstdLevel) {
-  const uint32_t levels = levelCount(level0.w, level0.h);
+std::vector<uint8_t> encodeStoredLevels(TileImage t, int zstdLevel) {
+  const uint32_t levels = levelCount(t.w, t.h);
   std::vector<LevelEntry> entries;
   std::vector<std::vector<uint8_t>> frames;
-  TileImage t = level0;
   uint32_t lv = 0;
   for (uint32_t want : kStoredLevels) {
     if (want >= levels) break;
     for (; lv < want; ++lv) t = coarserLevel(t);
-    Interior in = interiorPlanes(t.w, t.h, !t.normals.empty(), !t.rgba.empty());
-    copyInterior(t, in, false);
-    frames.push_back(encodeTilePlanes(in.planes, zstdLevel));
+    frames.push_back(encodeTilePlanes(interiorPlanes(t), zstdLevel));
     entries.push_back({want, uint32_t(frames.back().size())});
   }
   const uint32_t count = uint32_t(entries.size());
@@ -225,11 +196,9 @@ Status decodeStoredLevel(std::span<const uint8_t> blob, uint32_t tileW, uint32_t
     return Status::badInput("stored levels: no level " + std::to_string(level));
   uint32_t w, h;
   levelDims(tileW, tileH, level, w, h);
-  Interior in = interiorPlanes(w, h, normals, rgba);
-  const Status s = decodeTilePlanes(blob.subspan(starts[k], entries[k].bytes), in.planes);
-  if (!s) return Status::badInput("stored level " + std::to_string(level) + ": " + s.message());
   out = blankTile(w, h, normals, rgba);
-  copyInterior(out, in, true);
+  const Status s = decodeTilePlanes(blob.subspan(starts[k], entries[k].bytes), interiorPlanes(out));
+  if (!s) return Status::badInput("stored level " + std::to_string(level) + ": " + s.message());
   fillGutter(out, normals, rgba);
   return Status::ok();
 }

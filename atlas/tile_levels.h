@@ -43,7 +43,7 @@ inline constexpr uint32_t kStoredLevels[] = {4};
 // the same texels as building them itself), each channel coded by the tile codec at zstd
 // `zstdLevel`. Layout: u32 count; per stored level u32 level and u32 bytes of its heights,
 // normals and colours (0: the channel is absent); then the coded channels in that order.
-std::vector<uint8_t> encodeStoredLevels(const TileImage& level0, int zstdLevel);
+std::vector<uint8_t> encodeStoredLevels(TileImage level0, int zstdLevel);
 // The finest level a blob stores that is no finer than `atMost` (0: none).
 uint32_t storedLevelAtMost(std::span<const uint8_t> blob, uint32_t atMost);
 // Decodes stored `level` of a tileW x tileH tile from its blob into `out` (sized here); an error

@@ -157,23 +157,10 @@ TileResidency::TileResidency(std::span<const CellRecord> cells, uint32_t layerSi
 }
 
 void TileResidency::levelSize(const CellRecord& c, uint32_t level, uint32_t& w, uint32_t& h) {
-  w = c.tileW;
-  h = c.tileH;
-  for (uint32_t k = 0; k < level; ++k) {
-    w = (w + 1) / 2;
-    h = (h + 1) / 2;
-  }
+  levelDims(c.tileW, c.tileH, level, w, h);
 }
 
-uint32_t TileResidency::levels(uint32_t cell) const {
-  uint32_t w = cells_[cell].tileW, h = cells_[cell].tileH, n = 1;
-  while (w > 1 || h > 1) {
-    w = (w + 1) / 2;
-    h = (h + 1) / 2;
-    ++n;
-  }
-  return n;
-}
+uint32_t TileResidency::levels(uint32_t cell) const { return levelCount(cells_[cell].tileW, cells_[cell].tileH); }
 
 uint64_t TileResidency::blockTexels(uint32_t cell, uint32_t level) const {
   uint32_t w, h;

@@ -229,7 +229,9 @@ TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
         EXPECT_FALSE(decodeStoredLevel(blob, sz[0], sz[1], l, false, true, got).isOk());
         EXPECT_FALSE(decodeStoredLevel(blob, sz[0] + 16, sz[1], l, true, true, got).isOk()) << "another tile's size";
       }
-      if (!stored) EXPECT_EQ(blob.size(), 4u) << "a tile with none of the levels stores a count of 0";
+      if (!stored) {
+        EXPECT_EQ(blob.size(), 4u) << "a tile with none of the levels stores a count of 0";
+      }
     }
 }
 
