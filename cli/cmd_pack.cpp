@@ -50,8 +50,12 @@ const char* kHelp =
     "  --coverage R           a texel is empty unless its surface point lies within R sample\n"
     "                         spacings of an input point (in 3-D: holes, scan edges and height\n"
     "                         jumps such as roof to ground stay open) (default 1.5)\n"
+    "  --fill-gaps R          point inputs: a gap inside a cell's height map is closed when every\n"
+    "                         texel of it lies within R coverage radii of surface: the gaps a\n"
+    "                         random scatter of points leaves, which look like pinholes from\n"
+    "                         afar (default 2; 0 keeps every gap open, for small real holes)\n"
     "  --splat R              point inputs: each point spreads over R sample spacings with a\n"
-    "                         smooth kernel (default 1; 0 = bilinear onto the nearest texels)\n"
+    "                         smooth kernel (default 1.5; 0 = bilinear onto the nearest texels)\n"
     "  --no-smooth            point inputs: keep the points where they are (default: moved onto\n"
     "                         their moving-least-squares surface where the neighbourhood is one,\n"
     "                         which averages out the noise of merged scans)\n"
@@ -202,6 +206,12 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
     if (*v <= 0 || *v > 100) return (Status::badInput("--coverage must be in (0, 100]"));
     opt.coverageRadius = *v;
   }
+  if (a.has("fill-gaps")) {
+    auto v = parseNumber("fill-gaps", a.get("fill-gaps"));
+    if (!v) return v.status();
+    if (*v < 0 || *v > 100) return (Status::badInput("--fill-gaps must be in [0, 100]"));
+    opt.gapReach = *v;
+  }
   if (a.has("outliers")) {
     auto v = parseNumber("outliers", a.get("outliers"));
     if (!v) return v.status();
@@ -318,7 +328,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
 int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage",
+                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage", "fill-gaps",
                       "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves",
                       "height-step", "normal-tolerance", "colour-tolerance", "zstd-level"},
                      {"as-points", "strict", "force", "no-smooth", "reproducible", "raw-pages", "no-levels", "lossless", "json", "quiet", "help"},

@@ -967,6 +967,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::
   SplatOptions so;
   so.splatRadius = job.opt.splatRadius * job.sum.spacing;
   so.coverageRadius = cover;
+  so.gapReach = job.opt.gapReach * cover;
   // The margin's samples and the surface between them may lie a little above or below the
   // cell's own points: the height range grows to hold them.
   so.fitHeightRange = true;
@@ -1194,14 +1195,14 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 12;  // 12: stored coarser levels (MIPZ); 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 13;  // 13: small gaps inside a tile closed; 12: stored coarser levels (MIPZ); 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
-      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d %d %d",
+      opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d %d %d %.17g",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,
       o.texelPerSpacing, o.coverageRadius, o.splatRadius, o.outlierRatio, int(o.smooth), int(o.asPoints), o.up.x(),
       o.up.y(), o.up.z(), o.octree.maxDepth, o.octree.minSplitPoints, o.octree.maxAngleDeg, o.octree.outlierFraction,
       o.normalNeighbours, o.maxPageSize, int(o.compressPages), o.heightStep, o.normalTolerance, o.colourTolerance, o.pageLevel,
-      int(o.storeLevels));
+      int(o.storeLevels), o.gapReach);
   XXH3_64bits_update(st, opts, size_t(n));
   for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);

@@ -32,6 +32,7 @@ struct PackOptions {
   double texelSize = 0;           // world units, every cell; 0 = per cell from its points' spacing
   double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
   double coverageRadius = 1.5;    // in sample spacings: texels whose surface point is farther stay empty
+  double gapReach = 2;            // in coverage radii: gaps inside a tile whose every texel is this near surface close
   double splatRadius = 1.5;       // in sample spacings: the point splat kernel (tangent planes)
   double outlierRatio = 3;        // local outlier test of point inputs (0: keep every point)
   bool smooth = true;             // point inputs: moving-least-squares smoothing
@@ -41,7 +42,7 @@ struct PackOptions {
   bool reproducible = false;      // no timings in META: the same input and options give the same bytes
   bool compressPages = true;      // pages coded losslessly per tile (HGTZ, NRMZ, COLZ) instead of raw
   int pageLevel = kDefaultTileLevel;  // zstd level of the coded tiles (1..kMaxTileLevel)
-  bool storeLevels = true;        // compressed pages: each tile's levels 2 and 4 stored too (MIPZ)
+  bool storeLevels = true;        // compressed pages: each tile's level 4 stored too (MIPZ)
   // What the pages keep (FORMAT.md, "Precision"): heights rounded to steps of at most this many
   // texels (0: every bit of the 16-bit code); normals and colours set to the page coder's
   // pyramid rebuild where that moves them by at most these degrees and grey levels (0: kept).

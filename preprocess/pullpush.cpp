@@ -127,6 +127,55 @@ void closeCracks(int W, int H, const std::vector<double>& surface, double tolera
     }
 }
 
+// Closes small enclosed gaps: a connected uncovered region that does not reach the tile's
+// border, every texel of which has a covered texel within `reach` in 3-D (texel centres on the
+// reconstructed surface), is covered. Randomly spaced samples leave such gaps where no sample
+// happens to fall within the coverage radius: pinholes that a far view shows as background
+// dots on a closed surface. A real hole wider than twice `reach` keeps its inside open, and so
+// does anything connected to the tile's border (scan edges, the cell's outside).
+void closeSmallHoles(const TileGrid& g, const std::vector<double>& surface, double reach, std::vector<uint8_t>& covered) {
+  const int W = g.width, H = g.height;
+  if (W < 3 || H < 3 || !(reach > 0)) return;
+  const int ri = static_cast<int>(std::ceil(reach / g.du)), rj = static_cast<int>(std::ceil(reach / g.dv));
+  std::vector<uint8_t> seen(covered.size(), 0);
+  std::vector<size_t> region, stack;
+  auto nearCovered = [&](size_t t) {
+    const int x = static_cast<int>(t % size_t(W)), y = static_cast<int>(t / size_t(W));
+    for (int j = std::max(0, y - rj); j <= std::min(H - 1, y + rj); ++j)
+      for (int i = std::max(0, x - ri); i <= std::min(W - 1, x + ri); ++i) {
+        const size_t c = size_t(j) * W + i;
+        if (!covered[c]) continue;
+        const double du = (i - x) * g.du, dv = (j - y) * g.dv, dh = surface[c] - surface[t];
+        if (du * du + dv * dv + dh * dh <= reach * reach) return true;
+      }
+    return false;
+  };
+  for (size_t start = 0; start < covered.size(); ++start) {
+    if (covered[start] || seen[start]) continue;
+    region.clear();
+    stack.assign(1, start);
+    seen[start] = 1;
+    bool closable = true;
+    while (!stack.empty()) {
+      const size_t t = stack.back();
+      stack.pop_back();
+      region.push_back(t);
+      const int x = static_cast<int>(t % size_t(W)), y = static_cast<int>(t / size_t(W));
+      if (x == 0 || y == 0 || x == W - 1 || y == H - 1 || std::isnan(surface[t])) closable = false;
+      const size_t next[4] = {t - 1, t + 1, t - size_t(W), t + size_t(W)};
+      const bool inside[4] = {x > 0, x < W - 1, y > 0, y < H - 1};
+      for (int k = 0; k < 4; ++k)
+        if (inside[k] && !covered[next[k]] && !seen[next[k]]) {
+          seen[next[k]] = 1;
+          stack.push_back(next[k]);
+        }
+    }
+    if (!closable) continue;
+    if (!std::all_of(region.begin(), region.end(), nearCovered)) continue;
+    for (const size_t t : region) covered[t] = 1;
+  }
+}
+
 }  // namespace
 
 namespace {
@@ -294,6 +343,7 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
   }
   std::vector<uint8_t> covered = coverage3d(g, s, surface, opt.coverageRadius);
   closeCracks(W, H, surface, std::max(g.du, g.dv), covered);
+  closeSmallHoles(g, surface, opt.gapReach, covered);
   out.wMin = g.wMin;
   out.wMax = g.wMax;
   if (opt.fitHeightRange)

@@ -53,6 +53,11 @@ struct SplatOptions {
   // A texel is covered when its reconstructed surface point lies within this 3-D distance of
   // a sample.
   double coverageRadius = 0;
+  // Then a gap the samples left inside the tile is covered where every texel of it lies within
+  // this 3-D distance of a covered texel (world units; 0: off): randomly spaced samples leave
+  // such gaps where none happens to fall within the coverage radius, and a far view shows them
+  // as background pinholes on a closed surface. Gaps that reach the tile's border stay open.
+  double gapReach = 0;
   // Widen [wMin, wMax] to hold every covered texel's height (else heights outside are clamped,
   // and a clamped height is a flat floor or ceiling a ray would hit at the box's face).
   bool fitHeightRange = false;

@@ -141,6 +141,68 @@ TEST(PullPush, OneTexelCracksBetweenRowsCloseWiderGapsAndEdgesStayOpen) {
   }
 }
 
+// Randomly scattered samples (a Poisson scatter, as a survey's returns) leave gaps inside the
+// tile where no sample falls within the coverage radius. With gapReach they close; a real hole
+// (radius 12 texels) keeps its inside open, and the part of the tile beyond the scan's edge
+// and a notch the scan left at the tile's border (both connected to the border) stay uncovered.
+TEST(PullPush, SmallGapsCloseRealHolesAndEdgesStayOpen) {
+  TileGrid g = unitGrid(128);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> U(-1, 1);
+  std::vector<double> u, v, w;
+  const double hole = 24 * g.du / 2;  // radius 12 texels, centred at (-0.4, 0)
+  while (u.size() < 5000) {
+    const double uu = U(rng), vv = U(rng);
+    if (uu > 0.3 || std::hypot(uu + 0.4, vv) < hole) continue;  // the scan ends at u = 0.3
+    if (vv > 0.7 && std::abs(uu + 0.5) < 2 * g.du) continue;  // a notch 4 texels wide from the border
+    u.push_back(uu);
+    v.push_back(vv);
+    w.push_back(analytic(uu, vv));
+  }
+  // About one sample per 2 texels over the scanned part: coverage radius 1.3 texels.
+  SplatOptions o = coverageOnly(1.3 * g.du);
+  auto gapsAwayFromHoleAndEdge = [&](const TileOutput& out, size_t& holeCovered, size_t& beyondEdge) {
+    size_t gaps = 0;
+    holeCovered = beyondEdge = 0;
+    for (int j = 3; j < g.height - 3; ++j)
+      for (int i = 3; i < g.width - 3; ++i) {
+        const double uu = g.u0 + (i + 0.5) * g.du, vv = g.v0 + (j + 0.5) * g.dv;
+        const bool on = out.heights[size_t(j) * g.width + i] != 0;
+        const double r = std::hypot(uu + 0.4, vv);
+        if (uu > 0.3 + 2 * o.coverageRadius || (vv > 0.7 + 2 * o.coverageRadius && std::abs(uu + 0.5) < g.du))
+          beyondEdge += on;
+        else if (r < hole - 4 * o.coverageRadius) holeCovered += on;
+        else if (uu < 0.3 - 2 * o.coverageRadius && r > hole + 2 * o.coverageRadius &&
+                 !(vv > 0.7 - 2 * o.coverageRadius && std::abs(uu + 0.5) < 2 * g.du + 2 * o.coverageRadius))
+          gaps += !on;
+      }
+    return gaps;
+  };
+  TileOutput open, closed;
+  pullPushTile(g, samples(u, v, w), o, open);
+  o.gapReach = 2 * o.coverageRadius;
+  pullPushTile(g, samples(u, v, w), o, closed);
+  size_t holeOpen, edgeOpen, holeClosed, edgeClosed;
+  const size_t gapsOpen = gapsAwayFromHoleAndEdge(open, holeOpen, edgeOpen);
+  const size_t gapsClosed = gapsAwayFromHoleAndEdge(closed, holeClosed, edgeClosed);
+  std::printf("gaps in the scanned part: %zu without gapReach, %zu with\n", gapsOpen, gapsClosed);
+  EXPECT_GT(gapsOpen, 20u) << "the scatter should leave gaps for this test to mean anything";
+  EXPECT_EQ(gapsClosed, 0u);
+  EXPECT_EQ(holeOpen, 0u);
+  EXPECT_EQ(holeClosed, 0u) << "the real hole's inside was covered";
+  EXPECT_EQ(edgeOpen, 0u);
+  EXPECT_EQ(edgeClosed, 0u) << "surface grew past the scan's edge";
+  // What was closed is the surface between the samples: heights as accurate as the covered ones.
+  double worst = 0;
+  for (size_t t = 0; t < closed.heights.size(); ++t) {
+    if (!closed.heights[t] || open.heights[t]) continue;
+    const int i = int(t % g.width), j = int(t / g.width);
+    const double uu = g.u0 + (i + 0.5) * g.du, vv = g.v0 + (j + 0.5) * g.dv;
+    worst = std::max(worst, std::abs(decodeHeight(closed.heights[t], closed.wMin, closed.wMax) - analytic(uu, vv)));
+  }
+  EXPECT_LT(worst, 0.01) << "a closed gap's height is off (range 0.2)";
+}
+
 TEST(PullPush, ColoursFollowSamples) {
   const TileGrid g = unitGrid(8);
   std::vector<double> u, v, w;
