@@ -137,6 +137,7 @@ void closeSmallHoles(const TileGrid& g, const std::vector<double>& surface, doub
   const int W = g.width, H = g.height;
   if (W < 3 || H < 3 || !(reach > 0)) return;
   const int ri = static_cast<int>(std::ceil(reach / g.du)), rj = static_cast<int>(std::ceil(reach / g.dv));
+  const std::vector<uint8_t> before = covered;  // closing one gap does not help another close
   std::vector<uint8_t> seen(covered.size(), 0);
   std::vector<size_t> region, stack;
   auto nearCovered = [&](size_t t) {
@@ -144,7 +145,7 @@ void closeSmallHoles(const TileGrid& g, const std::vector<double>& surface, doub
     for (int j = std::max(0, y - rj); j <= std::min(H - 1, y + rj); ++j)
       for (int i = std::max(0, x - ri); i <= std::min(W - 1, x + ri); ++i) {
         const size_t c = size_t(j) * W + i;
-        if (!covered[c]) continue;
+        if (!before[c]) continue;
         const double du = (i - x) * g.du, dv = (j - y) * g.dv, dh = surface[c] - surface[t];
         if (du * du + dv * dv + dh * dh <= reach * reach) return true;
       }
