@@ -96,7 +96,7 @@ TileImage blankTile(uint32_t w, uint32_t h, bool normals, bool rgba) {
 // A plain 2 x 2 mean would drift toward the far edge of an odd-sized tile by up to a fine texel
 // at level 1 and about 3 at level 3 (the dragon's depth error p95 under a quarter budget 3.6
 // texels; 1.5 with footprints).
-TileImage coarserLevel(const TileImage& s) {
+TileImage coarserLevel(const TileImage& s, double share) {
   const bool nn = !s.normals.empty(), cc = !s.rgba.empty();
   TileImage t = blankTile((s.w + 1) / 2, (s.h + 1) / 2, nn, cc);
   std::vector<Span> su(t.w), sv(t.h);
@@ -122,7 +122,7 @@ TileImage coarserLevel(const TileImage& s) {
           if (cc)
             for (int q = 0; q < 4; ++q) c[q] += wt * s.rgba[f * 4 + q];
         }
-      if (covered <= 0 || 2 * covered < area) continue;
+      if (covered <= 0 || covered < share * area) continue;
       const size_t o = at(t, int(i), int(j));
       t.heights[o] = uint16_t(std::clamp(std::lround(h / covered), 1L, 65535L));
       if (nn) {
@@ -156,14 +156,14 @@ uint32_t levelCount(uint32_t w, uint32_t h) {
   return n;
 }
 
-std::vector<uint8_t> encodeStoredLevels(TileImage t, int zstdLevel) {
+std::vector<uint8_t> encodeStoredLevels(TileImage t, int zstdLevel, double share) {
   const uint32_t levels = levelCount(t.w, t.h);
   std::vector<LevelEntry> entries;
   std::vector<std::vector<uint8_t>> frames;
   uint32_t lv = 0;
   for (uint32_t want : kStoredLevels) {
     if (want >= levels) break;
-    for (; lv < want; ++lv) t = coarserLevel(t);
+    for (; lv < want; ++lv) t = coarserLevel(t, share);
     frames.push_back(encodeTilePlanes(interiorPlanes(t), zstdLevel));
     entries.push_back({want, uint32_t(frames.back().size())});
   }

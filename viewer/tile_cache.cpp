@@ -45,7 +45,8 @@ Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std
     s = pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr);
     if (!s) t = blankTile(c.tileW, c.tileH, nn, cc);  // a damaged tile: every level uncovered
   }
-  while (out.back().w > 1 || out.back().h > 1) out.push_back(coarserLevel(out.back()));
+  const double share = coverShare((pack.meta().flags & kPackFromTriangles) != 0);
+  while (out.back().w > 1 || out.back().h > 1) out.push_back(coarserLevel(out.back(), share));
   for (uint32_t k = stored; k < std::min<size_t>(keepFrom, out.size()); ++k)
     out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
   return s ? levelError : s;

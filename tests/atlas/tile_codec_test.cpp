@@ -203,10 +203,11 @@ TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
   for (const auto& sz : sizes)
     for (double hole : {0.0, 0.3, 0.9}) {
       const TileImage t = randomTile(sz[0], sz[1], rng, hole);
-      const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel);
+      const double share = hole == 0.3 ? kPointCoverShare : kMeshCoverShare;
+      const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel, share);
       const uint32_t levels = levelCount(sz[0], sz[1]);
       std::vector<TileImage> built{t};
-      while (built.back().w > 1 || built.back().h > 1) built.push_back(coarserLevel(built.back()));
+      while (built.back().w > 1 || built.back().h > 1) built.push_back(coarserLevel(built.back(), share));
       ASSERT_EQ(built.size(), levels);
       uint32_t stored = 0;
       for (uint32_t l : kStoredLevels) {
@@ -239,7 +240,7 @@ TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
 TEST(TileLevels, DamagedStoredLevelsAreErrors) {
   std::mt19937 rng(5);
   const TileImage t = randomTile(64, 48, rng, 0.1);
-  const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel);
+  const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel, kMeshCoverShare);
   const uint32_t l = kStoredLevels[0];
   TileImage got;
   ASSERT_TRUE(decodeStoredLevel(blob, 64, 48, l, true, true, got).isOk());
