@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cstring>
 
+#include "atlas/zstd_context.h"
+
 namespace sa {
 namespace {
 
@@ -75,25 +77,9 @@ void applyPlanes(const uint8_t* planes, uint8_t* page, uint32_t pageWidth, TileR
   }
 }
 
-// zstd's contexts, one of each per thread and reused: ZSTD_compress and ZSTD_decompress create
-// and free one per call, which at level 6 cost about 20 us, as much as coding a small tile
-// (2 KB). The frames are the same bytes either way.
-struct ZstdContexts {
-  ZSTD_CCtx* c = ZSTD_createCCtx();
-  ZSTD_DCtx* d = ZSTD_createDCtx();
-  ~ZstdContexts() {
-    ZSTD_freeCCtx(c);
-    ZSTD_freeDCtx(d);
-  }
-};
-ZstdContexts& zstdContexts() {
-  thread_local ZstdContexts z;
-  return z;
-}
-
 std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, int level, size_t skip = 0) {
   std::vector<uint8_t> out(skip + ZSTD_compressBound(bytes.size()));
-  const size_t z = ZSTD_compressCCtx(zstdContexts().c, out.data() + skip, out.size() - skip, bytes.data(), bytes.size(), level);
+  const size_t z = ZSTD_compressCCtx(threadZstd().c, out.data() + skip, out.size() - skip, bytes.data(), bytes.size(), level);
   out.resize(ZSTD_isError(z) ? 0 : skip + z);  // cannot fail: the bound holds
   return out;
 }
@@ -246,7 +232,7 @@ Status decompressExactly(std::span<const uint8_t> blob, size_t want, std::vector
   if (declared != want)
     return Status::badInput("holds " + std::to_string(declared) + " bytes, the tile needs " + std::to_string(want));
   out.resize(want);
-  const size_t got = ZSTD_decompressDCtx(zstdContexts().d, out.data(), out.size(), blob.data(), blob.size());
+  const size_t got = ZSTD_decompressDCtx(threadZstd().d, out.data(), out.size(), blob.data(), blob.size());
   if (ZSTD_isError(got)) return Status::badInput(std::string("damaged (") + ZSTD_getErrorName(got) + ")");
   if (got != out.size()) return Status::badInput("decodes to fewer bytes than its frame says");
   return Status::ok();

@@ -14,6 +14,7 @@
 
 #include <Eigen/Geometry>
 
+#include "atlas/zstd_context.h"
 #include "common/fileio.h"
 
 namespace sa {
@@ -27,20 +28,6 @@ namespace {
 // every point two or three times; raw 36-byte records made the temporary files twice the input.
 constexpr uint32_t kMaxFrameRecords = 1u << 16;
 std::atomic<uint64_t> gScratchBytes{0}, gScratchRaw{0};
-
-// One compression and one decompression context per thread, freed with it.
-struct Zstd {
-  ZSTD_CCtx* c = ZSTD_createCCtx();
-  ZSTD_DCtx* d = ZSTD_createDCtx();
-  ~Zstd() {
-    ZSTD_freeCCtx(c);
-    ZSTD_freeDCtx(d);
-  }
-};
-Zstd& zstd() {
-  thread_local Zstd z;
-  return z;
-}
 
 // Byte b of record i to planes[b * m + i] (shuffle) and back (unshuffle), 16 records at a time:
 // each plane then gets 16 consecutive bytes instead of one (a byte at a time, the shuffle was
@@ -108,7 +95,7 @@ void undeltaPositions(ChunkPoint* r, size_t m, uint32_t shift) {
 }
 
 Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts, size_t n) {
-  ZSTD_CCtx* cctx = zstd().c;
+  ZSTD_CCtx* cctx = threadZstd().c;
   thread_local std::vector<uint8_t> planes, packed;
   thread_local std::vector<ChunkPoint> frame;
   for (size_t at = 0; at < n; at += kMaxFrameRecords) {
@@ -133,7 +120,7 @@ Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts,
 // Reads the next frame into out (replacing it); false at the end of the file. A frame that does
 // not decode (a truncated or foreign file) is an error naming the file.
 Result<bool> readFrame(std::FILE* f, const std::string& path, std::vector<ChunkPoint>& out) {
-  ZSTD_DCtx* dctx = zstd().d;
+  ZSTD_DCtx* dctx = threadZstd().d;
   thread_local std::vector<uint8_t> planes, packed;
   uint32_t head[3];
   const size_t got = std::fread(head, 4, 3, f);
