@@ -404,10 +404,12 @@ TEST_F(StreamingTest, APointPacksCoarseLevelsKeepItsCoverage) {
       ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, kReadDepth).isOk());
     ASSERT_FALSE(rb.tilesPending()) << "view " << v;
     ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, true).isOk());
-    EXPECT_GT(fr.stats.coarsened + fr.cellsDrawn, 0u);
+    // Every tile at level 0 would hold at least the pages' used texels (most of the atlas); the
+    // views hold 12.1-13.2 of 27.8 MiB, the far cells at coarse levels.
+    EXPECT_LT(double(fr.stats.residentBytes), 0.6 * double(rw.gpuBytes())) << "view " << v << " draws coarse levels";
     const RenderAgreement g = compareRenders(full.depth, fr.depth, whole.meta().texelSize);
-    std::printf("[survey-levels] view %d: IoU %.4f, %zu pixels only at full resolution, %zu only at the coarse levels\n",
-                v, g.iou, g.onlyA, g.onlyB);
+    std::printf("[survey-levels] view %d: IoU %.4f, %zu pixels only at full resolution, %zu only at the coarse levels; %.1f of %.1f MiB resident\n",
+                v, g.iou, g.onlyA, g.onlyB, fr.stats.residentBytes / 1048576.0, rw.gpuBytes() / 1048576.0);
     onlyFull += g.onlyA, onlyBudget += g.onlyB, both += g.both;
   }
   ASSERT_GT(both, 40000u);
