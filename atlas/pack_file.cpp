@@ -233,10 +233,7 @@ Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, c
       (l == 1 ? level0.normals : level0.rgba) = std::move(t);
     }
   }
-  if (storeLevels_) {
-    const double share = coverShare((meta_.flags & kPackFromTriangles) != 0);
-    SA_RETURN_IF_ERROR(append(encodeStoredLevels(std::move(level0), level_, share), 3));
-  }
+  if (storeLevels_) SA_RETURN_IF_ERROR(append(encodeStoredLevels(std::move(level0), level_), 3));
   return Status::ok();
 }
 

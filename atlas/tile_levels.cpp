@@ -10,12 +10,16 @@
 namespace sa {
 namespace {
 
+// Of a sixteenth's four quarters, those that must be covered for it to be (coarserLevel).
+constexpr int kCoverVotes = 2;
+
 size_t at(const TileImage& t, int i, int j) { return size_t(j + 1) * (t.w + 2) + size_t(i + 1); }
 
 // The gutter: the edge texels repeated (FORMAT.md).
 void fillGutter(TileImage& t, bool normals, bool rgba) {
   auto copy = [&](int fi, int fj, int ti, int tj) {
     t.heights[at(t, ti, tj)] = t.heights[at(t, fi, fj)];
+    if (!t.cover.empty()) t.cover[at(t, ti, tj)] = t.cover[at(t, fi, fj)];
     if (normals) std::copy_n(&t.normals[at(t, fi, fj) * kNormalBytes], kNormalBytes, &t.normals[at(t, ti, tj) * kNormalBytes]);
     if (rgba) std::copy_n(&t.rgba[at(t, fi, fj) * 4], 4, &t.rgba[at(t, ti, tj) * 4]);
   };
@@ -45,6 +49,57 @@ Span span(uint32_t i, uint32_t n, uint32_t w) {
   return s;
 }
 
+// Where the 8 sample points across each of n coarse texels (the centres of its sixteenths'
+// quarters, at (k + 0.5) / (8 n) of the box for k = 0 .. 8 n - 1) fall on a level w texels across:
+// the texel and the sixteenth of it, as coveredAt finds them. No sample lies on a boundary of a
+// sixteenth ((2k + 1) w / (16 n) = m / 4 has no solution for w = 2n or 2n - 1), so rounding
+// cannot move one.
+struct SampleAxis {
+  std::vector<uint32_t> texel;
+  std::vector<uint8_t> sub;
+};
+SampleAxis sampleAxis(uint32_t n, uint32_t w) {
+  SampleAxis s;
+  s.texel.resize(size_t(8) * n);
+  s.sub.resize(size_t(8) * n);
+  for (uint32_t k = 0; k < 8 * n; ++k) {
+    const double f = (k + 0.5) * w / (8.0 * n);
+    const int i = std::clamp(int(f), 0, int(w) - 1);
+    s.texel[k] = uint32_t(i);
+    s.sub[k] = uint8_t(std::clamp(int((f - i) * 4), 0, 3));
+  }
+  return s;
+}
+
+// The masks of level t (t.w x t.h) from its finer level s: a sixteenth is covered where at least
+// kCoverVotes of s's coverage at its quarters' centres are (coveredAt at the sample points,
+// looked up row by row instead of point by point).
+void coverMasks(const TileImage& s, TileImage& t) {
+  const SampleAxis su = sampleAxis(t.w, s.w), sv = sampleAxis(t.h, s.h);
+  std::vector<uint8_t> rows(size_t(8) * 8 * t.w);  // the 8 sample rows of one coarse row
+  for (uint32_t j = 0; j < t.h; ++j) {
+    for (uint32_t r = 0; r < 8; ++r) {
+      const uint32_t fj = sv.texel[8 * j + r], bit = 4u * sv.sub[8 * j + r];
+      uint8_t* row = &rows[size_t(r) * 8 * t.w];
+      for (uint32_t k = 0; k < 8 * t.w; ++k) {
+        const size_t f = at(s, int(su.texel[k]), int(fj));
+        row[k] = s.heights[f] != 0 && (s.cover.empty() || ((s.cover[f] >> (bit + su.sub[k])) & 1u));
+      }
+    }
+    for (uint32_t i = 0; i < t.w; ++i) {
+      uint16_t m = 0;
+      for (uint32_t b = 0; b < 4; ++b)
+        for (uint32_t a = 0; a < 4; ++a) {
+          const size_t k = 8 * i + 2 * a;
+          const uint8_t* r0 = &rows[size_t(2 * b) * 8 * t.w];
+          const uint8_t* r1 = r0 + 8 * t.w;
+          if (r0[k] + r0[k + 1] + r1[k] + r1[k + 1] >= kCoverVotes) m |= uint16_t(1u << (4 * b + a));
+        }
+      t.cover[at(t, int(i), int(j))] = m;
+    }
+  }
+}
+
 // A stored level's entry in a MIPZ blob: u32 level, u32 bytes of its frame.
 struct LevelEntry {
   uint32_t level = 0, bytes = 0;
@@ -53,10 +108,13 @@ constexpr size_t kEntryBytes = sizeof(LevelEntry);
 constexpr uint32_t kMaxStored = 16;
 
 // The blob's entries and where each one's frame begins; false when the header does not fit the blob.
-bool readEntries(std::span<const uint8_t> blob, std::vector<LevelEntry>& entries, std::vector<uint64_t>& starts) {
+bool readEntries(std::span<const uint8_t> blob, std::vector<LevelEntry>& entries, std::vector<uint64_t>& starts,
+                 bool* cover = nullptr) {
   uint32_t count = 0;
   if (blob.size() < 4) return false;
   std::memcpy(&count, blob.data(), 4);
+  if (cover) *cover = (count & kStoredCover) != 0;
+  count &= ~kStoredCover;
   if (count > kMaxStored || blob.size() < 4 + uint64_t(count) * kEntryBytes) return false;
   entries.resize(count);
   starts.resize(count);
@@ -77,6 +135,7 @@ std::vector<TilePlane> interiorPlanes(TileImage& t) {
   std::vector<TilePlane> planes{{reinterpret_cast<uint8_t*>(t.heights.data()), t.w + 2, inside, kHeightTexels}};
   if (!t.normals.empty()) planes.push_back({t.normals.data(), t.w + 2, inside, kNormalTexels});
   if (!t.rgba.empty()) planes.push_back({t.rgba.data(), t.w + 2, inside, kColorTexels});
+  if (!t.cover.empty()) planes.push_back({reinterpret_cast<uint8_t*>(t.cover.data()), t.w + 2, inside, kHeightTexels});
   return planes;
 }
 
@@ -93,23 +152,36 @@ TileImage blankTile(uint32_t w, uint32_t h, bool normals, bool rgba) {
   return t;
 }
 
+bool coveredAt(const TileImage& t, double x, double y) {
+  const double fx = x * t.w, fy = y * t.h;
+  const int i = std::clamp(int(fx), 0, int(t.w) - 1), j = std::clamp(int(fy), 0, int(t.h) - 1);
+  const size_t o = at(t, i, j);
+  if (t.heights[o] == 0) return false;
+  if (t.cover.empty()) return true;
+  const int a = std::clamp(int((fx - i) * 4), 0, 3), b = std::clamp(int((fy - j) * 4), 0, 3);
+  return (t.cover[o] >> (4 * b + a)) & 1u;
+}
+
 // A plain 2 x 2 mean would drift toward the far edge of an odd-sized tile by up to a fine texel
 // at level 1 and about 3 at level 3 (the dragon's depth error p95 under a quarter budget 3.6
 // texels; 1.5 with footprints).
-TileImage coarserLevel(const TileImage& s, double share) {
+TileImage coarserLevel(const TileImage& s) {
   const bool nn = !s.normals.empty(), cc = !s.rgba.empty();
   TileImage t = blankTile((s.w + 1) / 2, (s.h + 1) / 2, nn, cc);
+  t.cover.assign(t.heights.size(), 0);
+  coverMasks(s, t);
   std::vector<Span> su(t.w), sv(t.h);
   for (uint32_t i = 0; i < t.w; ++i) su[i] = span(i, t.w, s.w);
   for (uint32_t j = 0; j < t.h; ++j) sv[j] = span(j, t.h, s.h);
   for (uint32_t j = 0; j < t.h; ++j)
     for (uint32_t i = 0; i < t.w; ++i) {
-      double h = 0, n[3] = {0, 0, 0}, c[4] = {0, 0, 0, 0}, covered = 0, area = 0;
+      const size_t o = at(t, int(i), int(j));
+      if (t.cover[o] == 0) continue;
+      double h = 0, n[3] = {0, 0, 0}, c[4] = {0, 0, 0, 0}, covered = 0;
       const Span &a = su[i], &b = sv[j];
       for (uint32_t y = 0; y < b.count; ++y)
         for (uint32_t x = 0; x < a.count; ++x) {
           const double wt = a.weight[x] * b.weight[y];
-          area += wt;
           const size_t f = at(s, int(a.first + x), int(b.first + y));
           if (s.heights[f] == 0) continue;
           covered += wt;
@@ -122,8 +194,10 @@ TileImage coarserLevel(const TileImage& s, double share) {
           if (cc)
             for (int q = 0; q < 4; ++q) c[q] += wt * s.rgba[f * 4 + q];
         }
-      if (covered <= 0 || covered < share * area) continue;
-      const size_t o = at(t, int(i), int(j));
+      if (covered <= 0) {  // not reached: a set bit lies on a covered texel under the footprint
+        t.cover[o] = 0;
+        continue;
+      }
       t.heights[o] = uint16_t(std::clamp(std::lround(h / covered), 1L, 65535L));
       if (nn) {
         const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
@@ -156,18 +230,18 @@ uint32_t levelCount(uint32_t w, uint32_t h) {
   return n;
 }
 
-std::vector<uint8_t> encodeStoredLevels(TileImage t, int zstdLevel, double share) {
+std::vector<uint8_t> encodeStoredLevels(TileImage t, int zstdLevel) {
   const uint32_t levels = levelCount(t.w, t.h);
   std::vector<LevelEntry> entries;
   std::vector<std::vector<uint8_t>> frames;
   uint32_t lv = 0;
   for (uint32_t want : kStoredLevels) {
     if (want >= levels) break;
-    for (; lv < want; ++lv) t = coarserLevel(t, share);
+    for (; lv < want; ++lv) t = coarserLevel(t);
     frames.push_back(encodeTilePlanes(interiorPlanes(t), zstdLevel));
     entries.push_back({want, uint32_t(frames.back().size())});
   }
-  const uint32_t count = uint32_t(entries.size());
+  const uint32_t count = uint32_t(entries.size()) | kStoredCover;
   std::vector<uint8_t> out(4 + entries.size() * kEntryBytes);
   std::memcpy(out.data(), &count, 4);
   for (size_t k = 0; k < entries.size(); ++k) std::memcpy(out.data() + 4 + k * kEntryBytes, &entries[k], kEntryBytes);
@@ -189,7 +263,8 @@ Status decodeStoredLevel(std::span<const uint8_t> blob, uint32_t tileW, uint32_t
                          bool rgba, TileImage& out) {
   std::vector<LevelEntry> entries;
   std::vector<uint64_t> starts;
-  if (!readEntries(blob, entries, starts)) return Status::badInput("stored levels: a corrupt header");
+  bool cover = false;
+  if (!readEntries(blob, entries, starts, &cover)) return Status::badInput("stored levels: a corrupt header");
   size_t k = 0;
   while (k < entries.size() && entries[k].level != level) ++k;
   if (k == entries.size() || level >= levelCount(tileW, tileH))
@@ -197,6 +272,7 @@ Status decodeStoredLevel(std::span<const uint8_t> blob, uint32_t tileW, uint32_t
   uint32_t w, h;
   levelDims(tileW, tileH, level, w, h);
   out = blankTile(w, h, normals, rgba);
+  if (cover) out.cover.assign(out.heights.size(), 0);
   const Status s = decodeTilePlanes(blob.subspan(starts[k], entries[k].bytes), interiorPlanes(out));
   if (!s) return Status::badInput("stored level " + std::to_string(level) + ": " + s.message());
   fillGutter(out, normals, rgba);

@@ -18,27 +18,32 @@ struct TileImage {
   std::vector<uint16_t> heights;
   std::vector<uint8_t> normals;  // kNormalBytes a texel, empty when the pack has none
   std::vector<uint8_t> rgba;     // empty when the pack has no colour
+  // Levels above 0: per texel the coverage of its 4 x 4 sixteenths, bit 4 b + a for column a
+  // and row b (u and v increasing), 0 where the texel is uncovered. Empty: a covered texel is
+  // covered throughout (level 0, and the stored levels of packs before pipeline revision 15).
+  std::vector<uint16_t> cover;
 };
 
 // An uncovered w x h tile with its gutter, with or without normal and colour texels.
 TileImage blankTile(uint32_t w, uint32_t h, bool normals, bool rgba);
 // The next level of t: ceil(w / 2) x ceil(h / 2) texels over the same box (the shader spreads a
 // level's texels evenly over the cell's box), each the area average of the texels under its
-// footprint, which is 2 w / (w + 1) texels wide where w is odd. Covered where at least `share`
-// of the footprint is (coverShare); height and colour the covered texels' weighted mean, the
-// normal their normalized weighted mean.
-TileImage coarserLevel(const TileImage& t, double share);
+// footprint, which is 2 w / (w + 1) texels wide where w is odd. Its coverage is a 4 x 4 mask
+// (cover): a sixteenth is covered where at least 2 of t's coverage (coveredAt) at the centres
+// of its quarters are, and the texel where any sixteenth is; height and colour the covered
+// texels' weighted mean, the normal their normalized weighted mean. So a far view's coverage
+// edges stay within about a sixteenth of a coarse texel of level 0's, while holes and specks
+// under about a quarter of it close (without masks a texel's coverage was a share of its
+// footprint, and an edge moved by up to half a texel: a budget render of the 2 M-point survey
+// differed from the full one in 0.8 % of its pixels; docs/BENCHMARKS.md, "Sub-texel coverage
+// of coarse levels").
+TileImage coarserLevel(const TileImage& t);
+// Whether t covers the point (x, y) of its box, x and y in [0, 1): the texel there is covered and,
+// where t has a mask, so is the mask's sixteenth there (the shader's sampleHeight decides so).
+bool coveredAt(const TileImage& t, double x, double y);
+// A mask with every bit set: a texel covered throughout.
+inline constexpr uint16_t kFullCover = 0xffff;
 
-// The share of a coarse texel's footprint that must be covered for the texel to be covered.
-// Rasterized meshes: half, so a coverage edge stays where it was on average (a triangle's edge
-// is exact: the dragon's mesh loses about as many pixels as it gains). Point packs: 0.4. Their
-// cells overlap nowhere at creases (a margin texel that turns away is dropped), so a roof's and
-// its wall's coverage only meet there, and a level that pulls both edges back by up to half its
-// texel opens a crack into the building's hollow; their coverage edges are ragged unions of
-// splats besides. The 2 M-point survey's far views under a budget lost 2.5 times the pixels they
-// gained at half (docs/BENCHMARKS.md, "Coarse coverage of point packs").
-inline constexpr double kMeshCoverShare = 0.5, kPointCoverShare = 0.4;
-inline double coverShare(bool fromTriangles) { return fromTriangles ? kMeshCoverShare : kPointCoverShare; }
 // The interior size of a w x h tile at a level (ceil-halved `level` times).
 void levelDims(uint32_t w, uint32_t h, uint32_t level, uint32_t& lw, uint32_t& lh);
 // The levels a w x h tile has: 1 + the halvings down to one texel.
@@ -51,11 +56,14 @@ uint32_t levelCount(uint32_t w, uint32_t h);
 inline constexpr uint32_t kStoredLevels[] = {4};
 
 // A cell's MIPZ blob: its stored levels, built by coarserLevel from level 0 (so a reader gets
-// the same texels as building them itself), each channel coded by the tile codec at zstd
-// `zstdLevel`. Layout: u32 count; per stored level u32 level and u32 bytes of its heights,
-// normals and colours (0: the channel is absent); then the coded channels in that order.
-// `share`: coarserLevel's, the reader's for the pack (coverShare).
-std::vector<uint8_t> encodeStoredLevels(TileImage level0, int zstdLevel, double share);
+// the same texels as building them itself), each level's channels coded by the tile codec as one
+// frame at zstd `zstdLevel`. Layout (FORMAT.md, "Stored levels"): u32 count | kStoredCover; per
+// stored level u32 level and u32 bytes of its frame; then the frames: heights, normals and
+// colours where the pack has them, and the coverage masks.
+std::vector<uint8_t> encodeStoredLevels(TileImage level0, int zstdLevel);
+// The flag in a MIPZ blob's count word that says its frames hold the coverage masks (packs from
+// pipeline revision 15 on; older blobs decode without masks).
+inline constexpr uint32_t kStoredCover = 1u << 16;
 // The finest level a blob stores that is no finer than `atMost` (0: none).
 uint32_t storedLevelAtMost(std::span<const uint8_t> blob, uint32_t atMost);
 // Decodes stored `level` of a tileW x tileH tile from its blob into `out` (sized here); an error

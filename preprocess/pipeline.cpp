@@ -1195,7 +1195,7 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
   char opts[768];
   // kPipelineRevision changes whenever packing changes what it writes for the same input, so
   // packs made by an older build are not mistaken for up to date.
-  constexpr int kPipelineRevision = 14;  // 14: point packs' stored levels cover 0.4 of a footprint; 13: small gaps inside a tile closed; 12: stored coarser levels (MIPZ); 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
+  constexpr int kPipelineRevision = 15;  // 15: stored levels carry 4 x 4 coverage masks; 14: point packs' stored levels cover 0.4 of a footprint; 13: small gaps inside a tile closed; 12: stored coarser levels (MIPZ); 11: point chunks rounded to 1/1024 of their spacing for pass B; 10: point cells split past maxLeafPoints, chunk normals rounded to 15 bits; 9: precision options; 8: texels per cell from its spacing; 4: vertex-cone test, 16-bit normals, up-axis sign; 5: cracks; 6: normal signs propagated; 7: height moments summed per chunk
   const int n = std::snprintf(
       opts, sizeof(opts), "r%d f%u %llu %llu %.17g %.17g %.17g %.17g %.17g %d %d %.17g %.17g %.17g %d %u %.17g %.17g %d %u %d %.17g %.17g %d %d %d %.17g",
       kPipelineRevision, kPackVersion, (unsigned long long)o.memBudget, (unsigned long long)o.texelBudget, o.texelSize,

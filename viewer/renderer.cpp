@@ -141,7 +141,8 @@ struct Renderer::Gl {
   GLuint deferSlotsTex = 0, deferTilesTex = 0, deferBuf = 0;
   uint32_t deferCapacity = 0;  // tiles a slot's list holds
   GLsizeiptr itemCapacity = 0;
-  GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;
+  GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;  // heights: R16UI, --gpu-budget RG16UI (with the masks)
+  std::vector<uint16_t> heightMask;  // --gpu-budget: a level's heights and masks interleaved for upload
   // Streamed packs: the decoder, the cells decoded and waiting for upload, residency per cell.
   const PackReader* pack = nullptr;
   std::unique_ptr<TileStreamer> streamer;
@@ -243,6 +244,7 @@ Status Renderer::init(const PackReader& pack, bool streamPages, uint64_t gpuBudg
   hasNormals_ = pack.hasNormals();
   spacing_ = m.sampleSpacing;
   culler_ = std::make_unique<CellCuller>(pack.cells());
+  coverMasks_ = gpuBudget != 0;
   SA_RETURN_IF_ERROR(initModes(pack));
   SA_RETURN_IF_ERROR(link("splat.vert", "splat.frag", "", g.splat));
   SA_RETURN_IF_ERROR(link("points.vert", "points.frag", "", g.points));
@@ -333,20 +335,21 @@ unsigned Renderer::pageTexture(unsigned format, bool present, const uint8_t* fil
 
 // --gpu-budget: the page textures are a cache of square layers (the largest tile with its gutter,
 // at least 256 texels, to a power of two) as many as the budget holds; tiles stream in as the
-// frames plan, at the level each cell's projected texel size asks for.
+// frames plan, at the level each cell's projected texel size asks for. A height texel holds the
+// texel's coverage mask beside it (TileImage::cover; level 0 all set): one fetch reads both.
 Status Renderer::initBudget(const PackReader& pack, uint64_t budget, int maxLayers) {
   Gl& g = *gl_;
   uint32_t size = 256;
   for (const CellRecord& c : pack.cells())
     while (size < uint32_t(std::max(c.tileW, c.tileH)) + 2) size <<= 1;
-  const uint64_t texelBytes = 2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0);
+  const uint64_t texelBytes = 2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0) + 2;  // + the mask
   const uint64_t layerBytes = uint64_t(size) * size * texelBytes;
   const uint64_t layers = std::max<uint64_t>(1, budget / layerBytes);
   if (layers > uint64_t(maxLayers))
     return Status::badInput("--gpu-budget " + std::to_string(budget >> 20) + " MiB needs " + std::to_string(layers) +
                             " texture layers of " + std::to_string(size) + "^2 but the GL allows " + std::to_string(maxLayers));
   const uint8_t white[4] = {255, 255, 255, 255}, up[2] = {128, 128};
-  g.heightTex = pageTexture(GL_R16UI, true, nullptr, 0, size, size, uint32_t(layers));
+  g.heightTex = pageTexture(GL_RG16UI, true, nullptr, 0, size, size, uint32_t(layers));
   g.pageColorTex = pageTexture(GL_RGBA8, hasColor_, white, GL_RGBA, size, size, uint32_t(layers));
   g.normalTex = pageTexture(kNormalBytes == 2 ? GL_RG8 : GL_RG16, hasNormals_, up, GL_RG, size, size, uint32_t(layers));
   gpuBytes_ += layers * layerBytes;
@@ -383,7 +386,12 @@ void Renderer::uploadLevel(const TileResidency::Upload& u) {
   const GLenum nType = kNormalBytes == 2 ? GL_UNSIGNED_BYTE : GL_UNSIGNED_SHORT;
   const TileImage& t = g.levels[u.cell][u.level];
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);  // rows of an odd number of 2-byte texels
-  glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RED_INTEGER, GL_UNSIGNED_SHORT, t.heights.data());
+  g.heightMask.resize(t.heights.size() * 2);
+  for (size_t k = 0; k < t.heights.size(); ++k) {
+    g.heightMask[2 * k] = t.heights[k];
+    g.heightMask[2 * k + 1] = t.cover.empty() ? kFullCover : t.cover[k];
+  }
+  glTextureSubImage3D(g.heightTex, 0, x, y, z, W, H, 1, GL_RG_INTEGER, GL_UNSIGNED_SHORT, g.heightMask.data());
   if (hasColor_) glTextureSubImage3D(g.pageColorTex, 0, x, y, z, W, H, 1, GL_RGBA, GL_UNSIGNED_BYTE, t.rgba.data());
   if (hasNormals_) glTextureSubImage3D(g.normalTex, 0, x, y, z, W, H, 1, GL_RG, nType, t.normals.data());
   glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
@@ -405,7 +413,7 @@ void Renderer::dropLevels(uint32_t c, uint32_t from) {
     g.availFrom[c] = TileResidency::kNoLevel;
     g.streamer->release(c);
   } else {
-    for (uint32_t l = g.availFrom[c]; l < from; ++l) g.levels[c][l] = TileImage{g.levels[c][l].w, g.levels[c][l].h, {}, {}, {}};
+    for (uint32_t l = g.availFrom[c]; l < from; ++l) g.levels[c][l] = TileImage{g.levels[c][l].w, g.levels[c][l].h, {}, {}, {}, {}};
     g.availFrom[c] = uint8_t(from);
   }
   g.heldBytes -= before - levelBytes(g.levels[c]);
@@ -502,6 +510,10 @@ static std::string boxDefines(RenderMode m, bool inside) {
   return std::string(inside ? "" : "#define FRONT_FACES 1\n") + (m == RenderMode::kGrooves ? "#define GROOVES_DEFER 1\n" + deferDefines() : "");
 }
 
+// --gpu-budget: the surface programs read the levels' coverage masks (heightfield.glsl); without
+// a budget every tile is level 0 and the programs go without them.
+std::string Renderer::maskDefines() const { return coverMasks_ ? "#define COVER_MASKS 1\n" : ""; }
+
 // The self-shadowing programs a frame drawing mode m needs (its own, parallax's for the cells it
 // leaves to them, grooves' second pass), linked the first time.
 Status Renderer::ensureShadowPrograms(RenderMode m) {
@@ -510,8 +522,8 @@ Status Renderer::ensureShadowPrograms(RenderMode m) {
     const ModeInfo& mi = modeInfo(k);
     const int i = int(k);
     if (!mi.castUnit || mi.vertexShader || !g.front[i] || g.shadowFront[i]) continue;
-    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, false) + "#define SHADOWS 1\n", g.shadowFront[i], mi.castUnit));
-    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, true) + "#define SHADOWS 1\n", g.shadowInside[i], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, false) + maskDefines() + "#define SHADOWS 1\n", g.shadowFront[i], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, true) + maskDefines() + "#define SHADOWS 1\n", g.shadowInside[i], mi.castUnit));
   }
   if (m == RenderMode::kGrooves && g.groovePixel[0] && !g.groovePixel[2])
     SA_RETURN_IF_ERROR(link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define SHADOWS 1\n" + deferDefines(), g.groovePixel[2],
@@ -541,7 +553,7 @@ Status Renderer::initModes(const PackReader& pack) {
   Gl& g = *gl_;
   for (const ModeInfo& mi : allModes()) {
     if (mi.vertexShader) {  // draws its own geometry (slices): one program, no box faces
-      SA_RETURN_IF_ERROR(link(mi.vertexShader, mi.fragmentShader, "", g.front[int(mi.mode)]));
+      SA_RETURN_IF_ERROR(link(mi.vertexShader, mi.fragmentShader, maskDefines(), g.front[int(mi.mode)]));
       continue;
     }
     if (!mi.castUnit) continue;
@@ -591,8 +603,8 @@ Status Renderer::initModes(const PackReader& pack) {
       gpuBytes_ += vdmBytes_;
     }
     const int k = int(mi.mode);
-    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(mi.mode, false), g.front[k], mi.castUnit));
-    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(mi.mode, true), g.inside[k], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(mi.mode, false) + maskDefines(), g.front[k], mi.castUnit));
+    SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(mi.mode, true) + maskDefines(), g.inside[k], mi.castUnit));
   }
   glCreateBuffers(1, &g.counterBuf);
   glNamedBufferStorage(g.counterBuf, (8 + 256) * 4, nullptr, GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);

@@ -190,6 +190,7 @@ class Renderer {
   void uploadPages(const PackReader& pack);
   unsigned pageTexture(unsigned format, bool present, const uint8_t* fill, unsigned fillFormat, uint32_t w, uint32_t h,
                        uint32_t layers);
+  std::string maskDefines() const;
   Status initBudget(const PackReader& pack, uint64_t budget, int maxLayers);
   void uploadLevel(const TileResidency::Upload& u);
   bool planBudget(const Camera& cam, const Eigen::Vector3d& camRel, const VisibleSet& vis, FrameStats& st);
@@ -227,6 +228,7 @@ class Renderer {
   Eigen::Vector3d boundsMin_, boundsMax_;
   uint32_t cellCount_ = 0;
   bool hasColor_ = false, hasNormals_ = false;
+  bool coverMasks_ = false;  // --gpu-budget: coarse levels with coverage masks (maskDefines)
   uint64_t gpuBytes_ = 0, pointCount_ = 0, exactBytes_ = 0, vdmBytes_ = 0, gdmBytes_ = 0, grooveBytes_ = 0;
   std::string modeProblems_[kRenderModes];
   // A mode's shader costs llvmpipe on every pixel of every box it draws, taken branches or not, so

@@ -29,7 +29,7 @@ Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std
     for (uint32_t l = 0; l < stored; ++l) {
       uint32_t w, h;
       levelDims(c.tileW, c.tileH, l, w, h);
-      out.push_back(TileImage{w, h, {}, {}, {}});
+      out.push_back(TileImage{w, h, {}, {}, {}, {}});
     }
     out.emplace_back();
     levelError = pack.decodeStoredLevel(cell, stored, out.back());
@@ -45,10 +45,9 @@ Status buildLevels(const PackReader& pack, uint32_t cell, uint32_t keepFrom, std
     s = pack.decodeCellInto(cell, t.heights.data(), nn ? t.normals.data() : nullptr, cc ? t.rgba.data() : nullptr);
     if (!s) t = blankTile(c.tileW, c.tileH, nn, cc);  // a damaged tile: every level uncovered
   }
-  const double share = coverShare((pack.meta().flags & kPackFromTriangles) != 0);
-  while (out.back().w > 1 || out.back().h > 1) out.push_back(coarserLevel(out.back(), share));
+  while (out.back().w > 1 || out.back().h > 1) out.push_back(coarserLevel(out.back()));
   for (uint32_t k = stored; k < std::min<size_t>(keepFrom, out.size()); ++k)
-    out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
+    out[k] = TileImage{out[k].w, out[k].h, {}, {}, {}, {}};  // a new image: the texels' memory freed, not kept as capacity
   return s ? levelError : s;
 }
 
@@ -72,7 +71,7 @@ uint64_t defaultGpuBudget(uint64_t atlas, uint64_t ram, uint64_t gpu) {
 
 uint64_t levelBytes(const std::vector<TileImage>& levels) {
   uint64_t b = 0;
-  for (const TileImage& t : levels) b += t.heights.size() * 2 + t.normals.size() + t.rgba.size();
+  for (const TileImage& t : levels) b += t.heights.size() * 2 + t.normals.size() + t.rgba.size() + t.cover.size() * 2;
   return b;
 }
 

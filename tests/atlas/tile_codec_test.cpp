@@ -203,11 +203,10 @@ TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
   for (const auto& sz : sizes)
     for (double hole : {0.0, 0.3, 0.9}) {
       const TileImage t = randomTile(sz[0], sz[1], rng, hole);
-      const double share = hole == 0.3 ? kPointCoverShare : kMeshCoverShare;
-      const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel, share);
+      const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel);
       const uint32_t levels = levelCount(sz[0], sz[1]);
       std::vector<TileImage> built{t};
-      while (built.back().w > 1 || built.back().h > 1) built.push_back(coarserLevel(built.back(), share));
+      while (built.back().w > 1 || built.back().h > 1) built.push_back(coarserLevel(built.back()));
       ASSERT_EQ(built.size(), levels);
       uint32_t stored = 0;
       for (uint32_t l : kStoredLevels) {
@@ -226,6 +225,8 @@ TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
         EXPECT_EQ(got.heights, built[l].heights) << sz[0] << "x" << sz[1] << " level " << l << " holes " << hole;
         EXPECT_EQ(got.normals, built[l].normals);
         EXPECT_EQ(got.rgba, built[l].rgba);
+        EXPECT_EQ(got.cover, built[l].cover);
+        EXPECT_EQ(got.cover.size(), got.heights.size()) << "a stored level has its coverage masks";
         // The pack's channels must match the blob's.
         EXPECT_FALSE(decodeStoredLevel(blob, sz[0], sz[1], l, false, true, got).isOk());
         EXPECT_FALSE(decodeStoredLevel(blob, sz[0] + 16, sz[1], l, true, true, got).isOk()) << "another tile's size";
@@ -236,11 +237,38 @@ TEST(TileLevels, StoredLevelsAreTheLevelsBuiltFromTheTile) {
     }
 }
 
+// Packs before pipeline revision 15 stored levels without coverage masks (no kStoredCover in the
+// count word): they decode as they were, a covered texel covered throughout.
+TEST(TileLevels, StoredLevelsWithoutMasksStillDecode) {
+  std::mt19937 rng(9);
+  TileImage t = randomTile(64, 48, rng, 0.3);
+  const uint32_t l = kStoredLevels[0];
+  for (uint32_t k = 0; k < l; ++k) t = coarserLevel(t);
+  const TileRegion inside{1, 1, t.w, t.h};
+  const std::vector<TilePlane> planes{{reinterpret_cast<uint8_t*>(t.heights.data()), t.w + 2, inside, kHeightTexels},
+                                      {t.normals.data(), t.w + 2, inside, kNormalTexels},
+                                      {t.rgba.data(), t.w + 2, inside, kColorTexels}};
+  const std::vector<uint8_t> frame = encodeTilePlanes(planes);
+  const uint32_t head[3] = {1, l, uint32_t(frame.size())};
+  std::vector<uint8_t> blob(sizeof head);
+  std::memcpy(blob.data(), head, sizeof head);
+  blob.insert(blob.end(), frame.begin(), frame.end());
+  EXPECT_EQ(storedLevelAtMost(blob, 31), l);
+  TileImage got;
+  ASSERT_TRUE(decodeStoredLevel(blob, 64, 48, l, true, true, got).isOk());
+  EXPECT_EQ(got.heights, t.heights);
+  EXPECT_TRUE(got.cover.empty());
+  const std::vector<uint8_t> masked = encodeStoredLevels(randomTile(64, 48, rng, 0.3), kDefaultTileLevel);
+  uint32_t word = 0;
+  std::memcpy(&word, masked.data(), 4);
+  EXPECT_EQ(word, 1u | kStoredCover);
+}
+
 // A damaged blob is an error naming what is wrong, never a crash or a read past it.
 TEST(TileLevels, DamagedStoredLevelsAreErrors) {
   std::mt19937 rng(5);
   const TileImage t = randomTile(64, 48, rng, 0.1);
-  const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel, kMeshCoverShare);
+  const std::vector<uint8_t> blob = encodeStoredLevels(t, kDefaultTileLevel);
   const uint32_t l = kStoredLevels[0];
   TileImage got;
   ASSERT_TRUE(decodeStoredLevel(blob, 64, 48, l, true, true, got).isOk());

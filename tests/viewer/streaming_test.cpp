@@ -361,18 +361,21 @@ TEST_F(StreamingTest, AGpuBudgetOfAQuarterOfTheAtlasDrawsTheSameScene) {
                 v, frames + 1, fr.stats.residentBytes / 1048576.0, budget / 1048576.0, fr.stats.heldBytes / 1048576.0, fr.stats.coarsened, g.iou, g.onlyA, g.onlyB,
                 g.depthMedian, g.depthP95);
     const double iou = g.iou, median = g.depthMedian;
-    EXPECT_GE(iou, 0.88) << "view " << v;  // measured 0.907-0.953: coarse levels close sub-pixel holes (2:1 of the differences)
+    // Measured 0.976-0.992 (0.907-0.953 before the levels had coverage masks): coarse levels
+    // still close sub-pixel holes (about 2:1 of the differences).
+    EXPECT_GE(iou, 0.96) << "view " << v;
     EXPECT_LE(median, 1.0) << "view " << v;
   }
   std::printf("%u cells evicted over the orbit\n", evicted);
 }
 
 // A generated survey (sa_gen_terrain: rolling ground and box buildings, a LAS without normals)
-// seen from afar, where every cell draws a coarse level: the coarse levels err toward covering.
-// A pixel they lose is a crack (most along the creases where a roof and its wall only meet,
-// open into the buildings' hollows); one they gain is a sub-pixel overhang at an edge. Measured
-// over the 4 views: 548 pixels lost against 1028 gained, IoU 0.9940-0.9949; with the mesh rule
-// (a coarse texel covered where half its footprint is) 1063 lost against 858, IoU 0.9928-0.9939.
+// seen from afar, where every cell draws a coarse level: the levels' coverage masks keep level
+// 0's coverage edges to a sixteenth of a coarse texel, so they lose about as many pixels as they
+// gain, and few. Measured over the 4 views: 303 pixels lost against 383 gained, IoU 0.9971-0.9982.
+// Before the masks, a coarse texel was covered where 0.4 of its footprint was: 548 lost against
+// 1028 gained, IoU 0.9940-0.9949; at half, 1063 lost against 858, IoU 0.9928-0.9939. What
+// differs now is mostly single pixels, a sub-pixel hole in the ground seen or not.
 TEST_F(StreamingTest, APointPacksCoarseLevelsKeepItsCoverage) {
   test::TempDir d;
   const std::string gen = std::string(SA_GEN_TERRAIN) + " 300000 " + d.file("s.las") + " > /dev/null";
@@ -404,18 +407,19 @@ TEST_F(StreamingTest, APointPacksCoarseLevelsKeepItsCoverage) {
       ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, kReadDepth).isOk());
     ASSERT_FALSE(rb.tilesPending()) << "view " << v;
     ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, true).isOk());
-    // Every tile at level 0 would hold at least the pages' used texels (most of the atlas); the
-    // views hold 12.1-13.2 of 27.8 MiB, the far cells at coarse levels.
-    EXPECT_LT(double(fr.stats.residentBytes), 0.6 * double(rw.gpuBytes())) << "view " << v << " draws coarse levels";
+    // Every tile at level 0 would hold at least the pages' used texels (most of the atlas, and a
+    // budget's texel is 12 bytes against the atlas's 10: it holds its mask); the views hold
+    // 14.5-15.8 of 27.8 MiB, the far cells at coarse levels.
+    EXPECT_LT(double(fr.stats.residentBytes), 0.65 * double(rw.gpuBytes())) << "view " << v << " draws coarse levels";
     const RenderAgreement g = compareRenders(full.depth, fr.depth, whole.meta().texelSize);
     std::printf("[survey-levels] view %d: IoU %.4f, %zu pixels only at full resolution, %zu only at the coarse levels; %.1f of %.1f MiB resident\n",
                 v, g.iou, g.onlyA, g.onlyB, fr.stats.residentBytes / 1048576.0, rw.gpuBytes() / 1048576.0);
     onlyFull += g.onlyA, onlyBudget += g.onlyB, both += g.both;
   }
   ASSERT_GT(both, 40000u);
-  EXPECT_LE(double(onlyFull), 0.8 * double(onlyBudget)) << "cracks at the coarse levels";
-  EXPECT_LE(double(onlyBudget), 2.5 * double(onlyFull)) << "coverage grown at the coarse levels";
-  EXPECT_GE(double(both) / double(both + onlyFull + onlyBudget), 0.993);
+  EXPECT_LE(double(onlyFull), 1.5 * double(onlyBudget)) << "cracks at the coarse levels";
+  EXPECT_LE(double(onlyBudget), 1.5 * double(onlyFull)) << "coverage grown at the coarse levels";
+  EXPECT_GE(double(both) / double(both + onlyFull + onlyBudget), 0.996);
 }
 
 }  // namespace

@@ -82,21 +82,82 @@ TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
     EXPECT_LT(levelBytes(m), levelBytes(all));
     m.assign(all.begin() + 1, all.end());
     // Level 1 texel (0, 0): its footprint is [0, 2 w / (w + 1)) in level 0's texels (2 where w is
-    // even): covered where the pack's share of it is (coverShare), the covered texels'
-    // area-weighted mean.
+    // even): the covered texels' area-weighted mean, covered where its mask is. A sixteenth
+    // inside one level-0 texel is covered where that texel is.
     const double fu = 2.0 * c.tileW / m[0].w, fv = 2.0 * c.tileH / m[0].h;
-    double sum = 0, covered = 0, area = 0;
+    double sum = 0, covered = 0;
     for (int j = 0; j < std::min<int>(2, c.tileH); ++j)
       for (int k = 0; k < std::min<int>(2, c.tileW); ++k) {
         const double wt = std::clamp(fu / 2 - k, 0.0, 1.0) * std::clamp(fv / 2 - j, 0.0, 1.0);
-        area += wt;
         if (uint16_t v = p.texel(c, k, j)) sum += wt * v, covered += wt;
       }
-    const uint16_t got = m[0].heights[size_t(1) * (m[0].w + 2) + 1];
-    if (covered < coverShare((p.meta().flags & kPackFromTriangles) != 0) * area) EXPECT_EQ(got, 0);
-    else EXPECT_NEAR(got, sum / covered, 0.51);
+    const size_t o = size_t(1) * (m[0].w + 2) + 1;
+    const uint16_t got = m[0].heights[o], mask = m[0].cover[o];
+    EXPECT_EQ(got != 0, mask != 0);
+    if (got) EXPECT_NEAR(got, sum / covered, 0.51);
+    for (int b = 0; b < 4; ++b)
+      for (int a = 0; a < 4; ++a) {
+        const int x0 = int(a * fu / 4), x1 = int(std::ceil((a + 1) * fu / 4)) - 1;
+        const int y0 = int(b * fv / 4), y1 = int(std::ceil((b + 1) * fv / 4)) - 1;
+        if (x0 != x1 || y0 != y1 || x0 >= c.tileW || y0 >= c.tileH) continue;
+        EXPECT_EQ((mask >> (4 * b + a)) & 1, p.texel(c, x0, y0) != 0) << "sixteenth " << a << ", " << b;
+      }
     // The gutter repeats the edge.
-    EXPECT_EQ(m[0].heights[0], m[0].heights[size_t(1) * (m[0].w + 2) + 1]);
+    EXPECT_EQ(m[0].heights[0], m[0].heights[o]);
+    EXPECT_EQ(m[0].cover[0], mask);
+  }
+}
+
+// A coarse level's coverage (its masks) keeps level 0's edges to a sixteenth of its texel, however
+// far the level is from level 0, and drops what is under a quarter of a texel: a one-texel hole
+// and a one-texel speck are gone by level 3 (a far view would show them in pixels that a pixel's
+// ray picks by chance). Without masks an edge moved by up to half a coarse texel.
+TEST(TileMips, CoarseMasksKeepLevelZerosCoverageEdges) {
+  for (uint32_t W : {96u, 75u}) {
+    TileImage t = blankTile(W, W, false, false);
+    const double edge = 37.3;  // covered where u < edge (level 0's texel units)
+    auto inside = [&](int i, int j) { return i + 0.5 < edge + 0.25 * j; };
+    for (int j = 0; j < int(W); ++j)
+      for (int i = 0; i < int(W); ++i) t.heights[size_t(j + 1) * (W + 2) + i + 1] = inside(i, j) ? 1000 : 0;
+    t.heights[size_t(60 + 1) * (W + 2) + 10 + 1] = 0;     // a hole
+    t.heights[size_t(20 + 1) * (W + 2) + 70 + 1] = 1000;  // a speck
+    const TileImage level0 = t;
+    for (int level = 1; level <= 5; ++level) {
+      const TileImage finer = t;
+      t = coarserLevel(t);
+      // Each mask as FORMAT.md words it: a sixteenth covered where 2 of its quarters' centres are.
+      for (uint32_t j = 0; j < t.h; ++j)
+        for (uint32_t i = 0; i < t.w; ++i)
+          for (int b = 0; b < 4; ++b)
+            for (int a = 0; a < 4; ++a) {
+              int votes = 0;
+              for (int q = 0; q < 4; ++q)
+                votes += coveredAt(finer, (i + (a + ((q & 1) + 0.5) / 2) / 4) / t.w, (j + (b + ((q >> 1) + 0.5) / 2) / 4) / t.h);
+              ASSERT_EQ((t.cover[size_t(j + 1) * (t.w + 2) + i + 1] >> (4 * b + a)) & 1, votes >= 2 ? 1 : 0)
+                  << "width " << W << ", level " << level << ", texel " << i << ", " << j;
+            }
+      const double sixteenth = double(W) / t.w / 4;  // in level 0's texels
+      int wrong = 0, far = 0;
+      for (int j = 0; j < int(W); ++j)
+        for (int i = 0; i < int(W); ++i) {
+          const double x = (i + 0.5) / W, y = (j + 0.5) / W;
+          const bool want = coveredAt(level0, x, y), got = coveredAt(t, x, y);
+          const double fromEdge = std::abs(i + 0.5 - (edge + 0.25 * j));
+          const double fromDots = std::min(std::hypot(i - 10, j - 60), std::hypot(i - 70, j - 20));
+          if (want == got) continue;
+          ++wrong;
+          if (std::min(fromEdge, fromDots) > 1.5 * sixteenth + 1) ++far;
+        }
+      EXPECT_EQ(far, 0) << "width " << W << ", level " << level << ": " << wrong << " texels differ";
+      if (level >= 3) {
+        EXPECT_TRUE(coveredAt(t, 10.5 / W, 60.5 / W)) << "the hole is closed at level " << level;
+        EXPECT_FALSE(coveredAt(t, 70.5 / W, 20.5 / W)) << "the speck is gone at level " << level;
+      }
+      if (level <= 2 && W % 4 == 0) {
+        EXPECT_EQ(wrong, 0) << "a sixteenth of level " << level << " is at most a texel of level 0";
+        EXPECT_FALSE(coveredAt(t, 10.5 / W, 60.5 / W)) << "the hole is kept at level " << level;
+      }
+    }
   }
 }
 
@@ -114,7 +175,7 @@ TEST(TileMips, EachLevelStaysWhereTheShaderDrawsIt) {
       for (uint32_t i = 0; i < W + 2; ++i) t.heights[size_t(j) * (W + 2) + i] = uint16_t(1000 + 100 * std::clamp<int>(int(i) - 1, 0, int(W) - 1));
     double worst = 0;
     for (int level = 1; t.w > 1; ++level) {
-      t = coarserLevel(t, kMeshCoverShare);
+      t = coarserLevel(t);
       for (uint32_t i = 0; i < t.w; ++i) {
         const double x = (i + 0.5) / t.w * W - 0.5;  // where the shader draws texel i, in level 0's texels
         const double got = (t.heights[size_t(1) * (t.w + 2) + i + 1] - 1000) / 100.0;

@@ -14,7 +14,10 @@ struct Cell {
 
 layout(std430, binding = 0) readonly buffer Cells { Cell cells[]; };
 
-layout(binding = 0) uniform usampler2DArray heightPages;  // R16UI, 0 = not covered
+// R16UI, 0 = not covered; with COVER_MASKS (--gpu-budget) RG16UI, g the texel's 4 x 4 coverage
+// mask (TileImage::cover in atlas/tile_levels.h: bit 4 b + a for column a, row b of its
+// sixteenths; level 0's all set).
+layout(binding = 0) uniform usampler2DArray heightPages;
 layout(binding = 1) uniform sampler2DArray colorPages;    // RGBA8
 layout(binding = 2) uniform sampler2DArray normalPages;   // RG16 unorm: octahedral world normal
 uniform bool storedNormals;                               // the pack has normal pages (FORMAT.md)
@@ -30,13 +33,14 @@ vec3 cellRelativeToCamera(Cell c) {
   return (c.originHi.xyz - camHi) + (c.originLo.xyz - camLo);
 }
 
-// Height at texel (i, j) of the tile in frame units, kUncovered where no surface is.
-// i in [-1, W], j in [-1, H]: the one-texel gutter repeats the edge (docs/FORMAT.md).
-float texelHeight(Cell c, ivec2 ij) {
-  uint k = texelFetch(heightPages, ivec3(c.tile.yz + ij, c.tile.x), 0).r;
+float decodeHeight(Cell c, uint k) {
   if (k == 0u) return kUncovered;
   return c.boxW.x + (float(k) - 1.0) / 65534.0 * (c.boxW.y - c.boxW.x);
 }
+
+// Height at texel (i, j) of the tile in frame units, kUncovered where no surface is.
+// i in [-1, W], j in [-1, H]: the one-texel gutter repeats the edge (docs/FORMAT.md).
+float texelHeight(Cell c, ivec2 ij) { return decodeHeight(c, texelFetch(heightPages, ivec3(c.tile.yz + ij, c.tile.x), 0).r); }
 
 // Continuous texel coordinates of frame point (u, v): texel centres at integers.
 vec2 texelCoord(Cell c, vec2 uv) {
@@ -67,16 +71,34 @@ vec2 tangentSlope(Cell c, ivec2 n) {
 
 // Bilinear height at (u, v). Where any of the four texels is uncovered, the nearest texel
 // decides coverage (so coverage edges stay sharp and holes stay open), and the uncovered ones
-// take its tangent plane (with stored normals; else its height).
+// take its tangent plane (with stored normals; else its height). With masks, the nearest
+// texel's mask decides first.
 float sampleHeight(Cell c, vec2 uv) {
   vec2 size = c.boxW.zw;
   vec2 f = clamp(texelCoord(c, uv), vec2(-0.5), size - 0.5);
   ivec2 i0 = ivec2(floor(f));
   vec2 a = f - vec2(i0);
-  float h00 = texelHeight(c, i0);
-  float h10 = texelHeight(c, i0 + ivec2(1, 0));
-  float h01 = texelHeight(c, i0 + ivec2(0, 1));
-  float h11 = texelHeight(c, i0 + ivec2(1, 1));
+#ifdef COVER_MASKS
+  uvec2 t00 = texelFetch(heightPages, ivec3(c.tile.yz + i0, c.tile.x), 0).rg;
+  uvec2 t10 = texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 0), c.tile.x), 0).rg;
+  uvec2 t01 = texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(0, 1), c.tile.x), 0).rg;
+  uvec2 t11 = texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 1), c.tile.x), 0).rg;
+  // The nearest texel's mask: the sixteenth of it that f lies in.
+  uint m = a.y < 0.5 ? (a.x < 0.5 ? t00.g : t10.g) : (a.x < 0.5 ? t01.g : t11.g);
+  ivec2 nm = clamp(i0 + ivec2(step(0.5, a)), ivec2(0), ivec2(size) - 1);
+  ivec2 q = clamp(ivec2(floor((f + 0.5 - vec2(nm)) * 4.0)), ivec2(0), ivec2(3));
+  if (((m >> uint(4 * q.y + q.x)) & 1u) == 0u) return kUncovered;
+  uvec4 k = uvec4(t00.r, t10.r, t01.r, t11.r);
+#else
+  uvec4 k = uvec4(texelFetch(heightPages, ivec3(c.tile.yz + i0, c.tile.x), 0).r,
+                  texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 0), c.tile.x), 0).r,
+                  texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(0, 1), c.tile.x), 0).r,
+                  texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 1), c.tile.x), 0).r);
+#endif
+  float h00 = decodeHeight(c, k.x);
+  float h10 = decodeHeight(c, k.y);
+  float h01 = decodeHeight(c, k.z);
+  float h11 = decodeHeight(c, k.w);
   if (min(min(h00, h10), min(h01, h11)) == kUncovered) {
     // The nearest texel (one of the four; at the tile's edge the gutter repeats it).
     float hn = a.y < 0.5 ? (a.x < 0.5 ? h00 : h10) : (a.x < 0.5 ? h01 : h11);
