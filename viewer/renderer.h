@@ -135,7 +135,7 @@ class Renderer {
   // outlive the renderer. Without streamPages the pack's pages must be in memory (PageLoad::kAll).
   // gpuBudget (bytes, needs streamPages): the page textures are a cache of that size, each
   // visible cell's tile resident at the level its projected texels ask for (a level-0 texel
-  // under a pixel: a coarser level), all visible cells coarser still when they do not fit;
+  // under kMaxTexelPx pixels: a coarser level), all visible cells coarser still when they do not fit;
   // cells not seen for longest are evicted. Tiles are decoded as the view asks for them and
   // memory holds only their levels on the GPU and coarser, so the pack is best opened with
   // PageLoad::kTiles (no page memory: packs larger than RAM). Draws parallax, slices, auto and points.

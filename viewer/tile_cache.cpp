@@ -193,6 +193,10 @@ bool TileResidency::makeRoom(uint32_t w, uint32_t h, BlockAllocator::Block& out,
   return true;
 }
 
+uint32_t TileResidency::levelForTexelPx(double px) {
+  return px >= kMaxTexelPx ? 0 : uint32_t(std::floor(std::log2(kMaxTexelPx / std::max(px, 1e-9))));
+}
+
 TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, const uint8_t* availFrom,
                                          const Eigen::Vector3d& eyeRel, double focalPx, uint64_t maxUploadBytes) {
   ++frame_;
@@ -205,9 +209,7 @@ TileResidency::Frame TileResidency::plan(std::span<const uint32_t> visible, cons
     const double dist = std::max((center_[cell] - eyeRel).norm() - radius_[cell], radius_[cell] * 1e-3 + 1e-30);
     const double texel = std::max((c.box[1] - c.box[0]) / c.tileW, (c.box[3] - c.box[2]) / c.tileH);
     const double px = texel * focalPx / dist;  // a level-0 texel's size on screen, in pixels
-    // The coarsest level whose texels stay under a pixel.
-    const uint32_t lv = px >= 1 ? 0 : uint32_t(std::floor(std::log2(1 / std::max(px, 1e-9))));
-    wants.push_back({cell, std::min(lv, levels(cell) - 1), px});
+    wants.push_back({cell, std::min(levelForTexelPx(px), levels(cell) - 1), px});
   }
   std::vector<uint32_t> lv = fitLevels(wants, out.bias);
   std::vector<size_t> order(wants.size());

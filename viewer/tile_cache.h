@@ -1,10 +1,10 @@
 // A GPU budget for a pack's tiles (--gpu-budget): which level of each cell's tile is resident in
 // a fixed cache of texture layers, and where. Coarser levels (each half the texels along each
 // side, covering the same box, so the shaders draw them unchanged) serve cells whose texels
-// would be under a pixel; when the visible set still does not fit, every visible cell goes one
-// level coarser until it does. Blocks of the cache are handed out by a buddy allocator; cells
-// not visible this frame are evicted least recently seen first. No GL here: the renderer
-// uploads what plan() returns.
+// would be under kMaxTexelPx pixels; when the visible set still does not fit, every visible
+// cell goes one level coarser until it does. Blocks of the cache are handed out by a buddy
+// allocator; cells not visible this frame are evicted least recently seen first. No GL here:
+// the renderer uploads what plan() returns.
 #pragma once
 #include <cstdint>
 #include <span>
@@ -16,6 +16,11 @@
 #include "atlas/tile_levels.h"
 
 namespace sa {
+
+// The largest a resident texel may be on screen, in pixels, before a finer level is asked for:
+// its diagonal under a pixel. At a whole pixel a coarse level's sub-pixel edges and pinholes
+// land in other pixels than level 0's (docs/BENCHMARKS.md, "The level a view asks for").
+inline constexpr double kMaxTexelPx = 0.70710678118654752;
 
 // Levels 0, 1, 2, ... of cell i's tile, down to one texel on the longer side, level 0 decoded
 // from the pack (PackReader::decodeCellInto: any PageLoad but kNone) and each coarser one by
@@ -100,6 +105,9 @@ class TileResidency {
   static constexpr uint8_t kNoLevel = 255;
   Frame plan(std::span<const uint32_t> visible, const uint8_t* availFrom, const Eigen::Vector3d& eyeRel, double focalPx,
              uint64_t maxUploadBytes);
+  // The coarsest level whose texels stay under kMaxTexelPx pixels on screen, where a level-0
+  // texel is px pixels (level 0 where even those are larger).
+  static uint32_t levelForTexelPx(double px);
   int level(uint32_t cell) const { return level_[cell]; }   // -1: not resident
   uint32_t levels(uint32_t cell) const;                     // levels the cell has (1 + its mips)
   uint64_t residentBytes() const { return alloc_.usedTexels() * texelBytes_; }

@@ -372,7 +372,8 @@ TEST_F(StreamingTest, AGpuBudgetOfAQuarterOfTheAtlasDrawsTheSameScene) {
 // A generated survey (sa_gen_terrain: rolling ground and box buildings, a LAS without normals)
 // seen from afar, where every cell draws a coarse level: the levels' coverage masks keep level
 // 0's coverage edges to a sixteenth of a coarse texel, so they lose about as many pixels as they
-// gain, and few. Measured over the 4 views: 303 pixels lost against 383 gained, IoU 0.9971-0.9982.
+// gain, and few. Measured over the 4 views: 339 pixels lost against 369 gained, IoU 0.9974-0.9976
+// (texels up to a whole pixel on screen instead of 0.71: 303 against 383, IoU 0.9971-0.9982).
 // Before the masks, a coarse texel was covered where 0.4 of its footprint was: 548 lost against
 // 1028 gained, IoU 0.9940-0.9949; at half, 1063 lost against 858, IoU 0.9928-0.9939. What
 // differs now is mostly single pixels, a sub-pixel hole in the ground seen or not.
@@ -407,10 +408,10 @@ TEST_F(StreamingTest, APointPacksCoarseLevelsKeepItsCoverage) {
       ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, kReadDepth).isOk());
     ASSERT_FALSE(rb.tilesPending()) << "view " << v;
     ASSERT_TRUE(rb.render(cam, RenderSettings{}, fr, true).isOk());
-    // Every tile at level 0 would hold at least the pages' used texels (most of the atlas, and a
-    // budget's texel is 12 bytes against the atlas's 10: it holds its mask); the views hold
-    // 14.5-15.8 of 27.8 MiB, the far cells at coarse levels.
-    EXPECT_LT(double(fr.stats.residentBytes), 0.65 * double(rw.gpuBytes())) << "view " << v << " draws coarse levels";
+    // Every tile at level 0 would hold at least the pages' used texels (most of the atlas) at
+    // 1.2x the bytes (a budget's texel is 12 bytes against the atlas's 10: it holds its mask),
+    // in power-of-two blocks; the views hold 18.6-22.1 of 27.8 MiB, the far cells at coarse levels.
+    EXPECT_LT(double(fr.stats.residentBytes), 0.85 * double(rw.gpuBytes())) << "view " << v << " draws coarse levels";
     const RenderAgreement g = compareRenders(full.depth, fr.depth, whole.meta().texelSize);
     std::printf("[survey-levels] view %d: IoU %.4f, %zu pixels only at full resolution, %zu only at the coarse levels; %.1f of %.1f MiB resident\n",
                 v, g.iou, g.onlyA, g.onlyB, fr.stats.residentBytes / 1048576.0, rw.gpuBytes() / 1048576.0);

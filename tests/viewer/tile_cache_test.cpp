@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 
 #include "../common/render_util.h"
@@ -217,6 +218,22 @@ struct SphereCells {
     return true;
   }
 };
+
+// The level a texel's size on screen asks for: the coarsest whose texels stay under
+// kMaxTexelPx pixels (their diagonals under one), the next coarser's over it.
+TEST(TileResidency, AViewAsksForTheCoarsestLevelWhoseTexelsStayUnderTheirLimit) {
+  EXPECT_EQ(TileResidency::levelForTexelPx(3.0), 0u);
+  EXPECT_EQ(TileResidency::levelForTexelPx(0.8), 0u) << "a texel over the limit but no finer level";
+  EXPECT_EQ(TileResidency::levelForTexelPx(0.9), 0u);
+  EXPECT_EQ(TileResidency::levelForTexelPx(0.5), 0u) << "0.5 px: level 1 would be 1 px, its diagonal 1.41";
+  EXPECT_EQ(TileResidency::levelForTexelPx(0.3), 1u);
+  for (double px = 1e-4; px < kMaxTexelPx; px *= 1.037) {
+    const uint32_t lv = TileResidency::levelForTexelPx(px);
+    EXPECT_LE(px * double(1u << lv), kMaxTexelPx * (1 + 1e-12)) << px;
+    EXPECT_GT(px * double(2u << lv), kMaxTexelPx) << px;
+    EXPECT_LE(std::sqrt(2.0) * px * double(1u << lv), 1.0 + 1e-12) << "the texel's diagonal under a pixel at " << px;
+  }
+}
 
 TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
   SphereCells sc;

@@ -78,23 +78,19 @@ float sampleHeight(Cell c, vec2 uv) {
   vec2 f = clamp(texelCoord(c, uv), vec2(-0.5), size - 0.5);
   ivec2 i0 = ivec2(floor(f));
   vec2 a = f - vec2(i0);
-#ifdef COVER_MASKS
+  // .g is the texel's coverage mask with COVER_MASKS; without, the texture is R16UI and .g reads 0.
   uvec2 t00 = texelFetch(heightPages, ivec3(c.tile.yz + i0, c.tile.x), 0).rg;
   uvec2 t10 = texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 0), c.tile.x), 0).rg;
   uvec2 t01 = texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(0, 1), c.tile.x), 0).rg;
   uvec2 t11 = texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 1), c.tile.x), 0).rg;
+#ifdef COVER_MASKS
   // The nearest texel's mask: the sixteenth of it that f lies in.
   uint m = a.y < 0.5 ? (a.x < 0.5 ? t00.g : t10.g) : (a.x < 0.5 ? t01.g : t11.g);
   ivec2 nm = clamp(i0 + ivec2(step(0.5, a)), ivec2(0), ivec2(size) - 1);
   ivec2 q = clamp(ivec2(floor((f + 0.5 - vec2(nm)) * 4.0)), ivec2(0), ivec2(3));
   if (((m >> uint(4 * q.y + q.x)) & 1u) == 0u) return kUncovered;
-  uvec4 k = uvec4(t00.r, t10.r, t01.r, t11.r);
-#else
-  uvec4 k = uvec4(texelFetch(heightPages, ivec3(c.tile.yz + i0, c.tile.x), 0).r,
-                  texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 0), c.tile.x), 0).r,
-                  texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(0, 1), c.tile.x), 0).r,
-                  texelFetch(heightPages, ivec3(c.tile.yz + i0 + ivec2(1, 1), c.tile.x), 0).r);
 #endif
+  uvec4 k = uvec4(t00.r, t10.r, t01.r, t11.r);
   float h00 = decodeHeight(c, k.x);
   float h10 = decodeHeight(c, k.y);
   float h01 = decodeHeight(c, k.z);
