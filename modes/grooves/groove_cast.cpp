@@ -2,12 +2,16 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
 
 #include <Eigen/Dense>
 
+#include <zstd.h>
+
+#include "atlas/zstd_context.h"
 #include "modes/exact/exact.h"
 
 namespace sa::gcast {
@@ -278,18 +282,27 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
   for (const CellPieces& cp : m.cells) {
     entries[cp.cell] = uint32_t(words.size());
     const size_t blk = words.size();
-    const uint32_t g = uint32_t(cp.grid);
-    uint32_t listLen = 0;
-    for (const auto& b : cp.bins) listLen += uint32_t(b.size());
-    const uint32_t listOff = kBlockHeaderWords + 2 * g * g, pieceOff = listOff + listLen;
+    const uint32_t g = uint32_t(cp.grid), maskWords = binMaskWords(g);
+    uint32_t listLen = 0, held = 0;
+    for (const auto& b : cp.bins) listLen += uint32_t(b.size()), held += !b.empty();
+    const uint32_t listOff = kBlockHeaderWords + 2 * maskWords + held + 1, pieceOff = listOff + listLen;
     words.insert(words.end(), {g, uint32_t(cp.pieces.size()), listOff, pieceOff});
     put(float(cp.floor) - 1e-6f * std::max(1.0f, std::abs(float(cp.floor))));
     put(float(cp.rise));
-    uint32_t start = 0;
-    for (const auto& b : cp.bins) {
-      words.insert(words.end(), {start, uint32_t(b.size())});
-      start += uint32_t(b.size());
+    // Sparse bins: which hold pieces (bit k of word k / 32), the held bins before each mask word,
+    // and each held bin's first entry in the lists (one more: the end of the last).
+    const size_t mask = words.size();
+    words.resize(words.size() + 2 * maskWords, 0);
+    for (size_t k = 0; k < cp.bins.size(); ++k)
+      if (!cp.bins[k].empty()) words[mask + k / 32] |= 1u << (k % 32);
+    for (uint32_t w = 0, before = 0; w < maskWords; ++w) {
+      words[mask + maskWords + w] = before;
+      before += uint32_t(std::popcount(words[mask + w]));
     }
+    uint32_t start = 0;
+    for (const auto& b : cp.bins)
+      if (!b.empty()) words.push_back(start), start += uint32_t(b.size());
+    words.push_back(start);
     for (const auto& b : cp.bins) words.insert(words.end(), b.begin(), b.end());
     for (const Piece& p : cp.pieces) {
       for (double v : {p.a.x(), p.a.y(), p.e.x(), p.e.y(), p.length, p.halfWidth, p.rimQ[0][0], p.rimQ[0][1], p.rimQ[0][2],
@@ -308,16 +321,27 @@ ExtraSection makeSection(const PackReader& pack, const Model& m, const std::stri
   h.pieceCount = pieces;
   h.bakeSeconds = bakeSeconds;
   h.wordCount = words.size();
-  h.jsonBytes = json.size();
+  // The JSON (only the window's list and `info` read it) zstd-compressed: it was half the section.
+  std::string packed(ZSTD_compressBound(json.size()), '\0');
+  const size_t jz = ZSTD_compressCCtx(threadZstd().c, packed.data(), packed.size(), json.data(), json.size(), kJsonZstdLevel);
+  if (ZSTD_isError(jz) || json.empty() || json.size() > kMaxJsonBytesPerGroove * (uint64_t(m.grooves) + 16)) {
+    packed = json;  // stored as it is (a bound-sized buffer fails only for want of memory; past the
+                    // readers' bound on a stated size, it is read as the bytes that are there)
+    h.jsonRawBytes = 0;
+  } else {
+    packed.resize(jz);
+    h.jsonRawBytes = uint32_t(json.size());
+  }
+  h.jsonBytes = packed.size();
   h.profileSamples = kProfileSamples;
   ExtraSection s;
   std::memcpy(s.id, kSectionId, 4);
-  s.bytes.resize(sizeof(h) + entries.size() * 4 + words.size() * 4 + json.size());
+  s.bytes.resize(sizeof(h) + entries.size() * 4 + words.size() * 4 + packed.size());
   uint8_t* o = s.bytes.data();
   std::memcpy(o, &h, sizeof(h));
   std::memcpy(o + sizeof(h), entries.data(), entries.size() * 4);
   if (!words.empty()) std::memcpy(o + sizeof(h) + entries.size() * 4, words.data(), words.size() * 4);
-  if (!json.empty()) std::memcpy(o + sizeof(h) + (entries.size() + words.size()) * 4, json.data(), json.size());
+  std::memcpy(o + sizeof(h) + (entries.size() + words.size()) * 4, packed.data(), packed.size());
   return s;
 }
 
@@ -348,19 +372,44 @@ Result<SectionView> readSection(const PackReader& pack) {
     if (b == kNoEntry) continue;
     if (uint64_t(b) + kBlockHeaderWords > W) return Status::badInput(where + "cell " + std::to_string(i) + "'s block is past the words");
     const uint32_t g = v.words[b], n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
-    if (g < 1 || g > kMaxGrid || lo != kBlockHeaderWords + 2 * g * g || po < lo || uint64_t(b) + po + uint64_t(n) * kPieceWords > W)
-      return Status::badInput(where + "cell " + std::to_string(i) + "'s block is malformed");
-    for (uint32_t k = 0; k < g * g; ++k) {
-      const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];
-      if (uint64_t(s) + cnt > po - lo) return Status::badInput(where + "cell " + std::to_string(i) + ": a bin's list is past its block");
-      for (uint32_t q = 0; q < cnt; ++q)
-        if (v.words[b + lo + s + q] >= n) return Status::badInput(where + "cell " + std::to_string(i) + ": a bin names a piece it lacks");
+    const std::string cellWhere = where + "cell " + std::to_string(i);
+    if (g < 1 || g > kMaxGrid || po < lo || uint64_t(b) + po + uint64_t(n) * kPieceWords > W)
+      return Status::badInput(cellWhere + "'s block is malformed");
+    // The bins' mask, the counts before each of its words, the held bins' starts.
+    const uint32_t M = binMaskWords(g);
+    if (uint64_t(kBlockHeaderWords) + 2 * M + 1 > lo) return Status::badInput(cellWhere + "'s block is malformed");
+    const uint32_t* mask = v.words + b + kBlockHeaderWords;
+    uint32_t held = 0;
+    for (uint32_t w = 0; w < M; ++w) {
+      if (mask[M + w] != held) return Status::badInput(cellWhere + ": its bins' counts do not add up");
+      held += uint32_t(std::popcount(mask[w]));
     }
+    if ((g * g) % 32 && mask[M - 1] >> ((g * g) % 32)) return Status::badInput(cellWhere + ": a bin past its grid");
+    if (lo != kBlockHeaderWords + 2 * M + held + 1) return Status::badInput(cellWhere + "'s block is malformed");
+    const uint32_t* starts = mask + 2 * M;
+    for (uint32_t k = 0; k < held; ++k)
+      if (starts[k] > starts[k + 1]) return Status::badInput(cellWhere + ": a bin's list is malformed");
+    if (held && (starts[0] != 0 || starts[held] > po - lo))
+      return Status::badInput(cellWhere + ": a bin's list is past its block");
+    for (uint32_t q = 0; held && q < starts[held]; ++q)
+      if (v.words[b + lo + q] >= n) return Status::badInput(cellWhere + ": a bin names a piece it lacks");
     for (uint32_t q = 0; q < n; ++q)
       if (uint64_t(v.words[b + po + q * kPieceWords + 12]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
         return Status::badInput(where + "cell " + std::to_string(i) + ": a piece names a profile it lacks");
   }
-  v.json.assign(reinterpret_cast<const char*>(v.words + W), h.jsonBytes);
+  const char* json = reinterpret_cast<const char*>(v.words + W);
+  if (h.jsonRawBytes == 0) {
+    v.json.assign(json, h.jsonBytes);
+  } else {
+    // The stated size is checked against the frame's own, and against what the grooves stored
+    // (whose profiles the words hold) can take, before anything that size is allocated.
+    const unsigned long long framed = ZSTD_getFrameContentSize(json, h.jsonBytes);
+    if (framed != h.jsonRawBytes || h.jsonRawBytes > kMaxJsonBytesPerGroove * (uint64_t(h.grooveCount) + 16))
+      return Status::badInput(where + "its groove list is damaged (zstd frame of " + std::to_string(h.jsonRawBytes) + " bytes)");
+    v.json.resize(h.jsonRawBytes);
+    const size_t got = ZSTD_decompressDCtx(threadZstd().d, v.json.data(), v.json.size(), json, h.jsonBytes);
+    if (ZSTD_isError(got) || got != h.jsonRawBytes) return Status::badInput(where + "its groove list is damaged (zstd)");
+  }
   v.present = true;
   v.bytes = bytes.size();
   return v;
@@ -394,10 +443,13 @@ Model modelFromSection(const PackReader& pack, const SectionView& v) {
     cp.floor = f(b + 4);
     cp.rise = blockRise(v, i);
     cp.bins.resize(size_t(cp.grid) * cp.grid);
-    for (size_t k = 0; k < cp.bins.size(); ++k) {
-      const uint32_t s = v.words[b + kBlockHeaderWords + 2 * k], cnt = v.words[b + kBlockHeaderWords + 1 + 2 * k];
-      cp.bins[k].assign(v.words + b + lo + s, v.words + b + lo + s + cnt);
-    }
+    const uint32_t* mask = v.words + b + kBlockHeaderWords;
+    const uint32_t* starts = mask + 2 * binMaskWords(uint32_t(cp.grid));
+    for (size_t k = 0, held = 0; k < cp.bins.size(); ++k)
+      if (mask[k / 32] >> (k % 32) & 1u) {
+        cp.bins[k].assign(v.words + b + lo + starts[held], v.words + b + lo + starts[held + 1]);
+        ++held;
+      }
     for (uint32_t q = 0; q < n; ++q) {
       const uint64_t w = uint64_t(b) + po + uint64_t(q) * kPieceWords;
       Piece p;

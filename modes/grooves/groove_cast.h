@@ -91,14 +91,21 @@ Model buildModel(const PackReader& pack, const GrooveSet& set);
 // The pack section `GROO` (docs/FORMAT.md): the model and the groove set's JSON (so `view` and
 // `info` list the grooves a pack draws).
 inline constexpr char kSectionId[4] = {'G', 'R', 'O', 'O'};
-inline constexpr uint32_t kSectionVersion = 2;  // 1 (tangent-plane rims) is refused: bake it again
+// 1 (tangent-plane rims) and 2 (a (first, count) pair for every bin, the JSON uncompressed) are
+// refused: bake it again.
+inline constexpr uint32_t kSectionVersion = 3;
 inline constexpr uint32_t kNoEntry = 0xffffffffu;
+inline constexpr int kJsonZstdLevel = 9;
+inline constexpr uint64_t kMaxJsonBytesPerGroove = 65536;  // a reader's bound on the JSON's stated size
+// A block's bins are sparse: a bit a bin (set: it holds pieces) in this many words, as many words
+// of the held bins before each, then each held bin's first list entry and the lists' end.
+inline constexpr uint32_t binMaskWords(uint32_t grid) { return (grid * grid + 31) / 32; }
 struct SectionHeader {
   uint32_t version, cellCount, grooveCount, pieceCount;
   double bakeSeconds;
   uint64_t wordCount;   // words after the entry table: profiles, then the cells' blocks
-  uint64_t jsonBytes;   // the groove set as JSON, after the words
-  uint32_t profileSamples, zero0;
+  uint64_t jsonBytes;   // the groove set as JSON (zstd; as it is where jsonRawBytes is 0), after the words
+  uint32_t profileSamples, jsonRawBytes;
   uint8_t zero[16];
 };
 static_assert(sizeof(SectionHeader) == 64);

@@ -193,20 +193,30 @@ float gAirExit(Cell c, GPiece p, vec3 o, vec3 d, float t, float t1) {
   return te < t1 ? te + 1e-6 * p.hw + 1e-7 * abs(te) : t1;
 }
 
-int gBin(Cell c, uint blk, vec2 q) {
-  int G = int(grooveWord[blk]);
+// The list of pieces of the bin under q: its first word and length (0 for an empty bin). The bins
+// are sparse (gcast::binMaskWords): a mask bit a bin, the held bins before each mask word, and
+// each held bin's first list entry.
+uint gBinList(Cell c, uint blk, vec2 q, out uint n) {
+  uint G = grooveWord[blk];
   vec2 f = (q - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * float(G);
-  ivec2 b = clamp(ivec2(floor(f)), ivec2(0), ivec2(G - 1));
-  return b.y * G + b.x;
+  uvec2 b = uvec2(clamp(ivec2(floor(f)), ivec2(0), ivec2(G) - 1));
+  uint k = b.y * G + b.x, M = (G * G + 31u) / 32u;
+  uint word = grooveWord[blk + 6u + k / 32u], bit = k % 32u;
+  n = 0u;
+  if (((word >> bit) & 1u) == 0u) return 0u;
+  uint held = grooveWord[blk + 6u + M + k / 32u] + uint(bitCount(word & ((1u << bit) - 1u)));
+  uint starts = blk + 6u + 2u * M + held;
+  uint start = grooveWord[starts];
+  n = grooveWord[starts + 1u] - start;
+  return blk + grooveWord[blk + 2u] + start;
 }
 
 // Whether q lies in any piece's capsule (out to its lips: there the surface is the lowest floor
 // over q, the height field is not); air: a piece whose floor q is above (-1: none, q is solid); lowest: the piece
 // with the lowest floor.
 bool gCover(Cell c, uint blk, vec3 q, out int air, out int lowest) {
-  int b = gBin(c, blk, q.xy);
-  uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
-  uint list = blk + grooveWord[blk + 2u] + start;
+  uint n;
+  uint list = gBinList(c, blk, q.xy, n);
   air = -1;
   lowest = -1;
   float low = 1e30;
@@ -498,9 +508,8 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
     float reach = length(d.xy) * (tH - ta), best = 1e30;
     for (int e = 0; e < (rise > 0.0 ? 2 : 0); ++e) {
       vec2 qe = (o + d * (e == 0 ? tH : ta)).xy;
-      int b = gBin(c, blk, qe);
-      uint start = grooveWord[blk + 6u + 2u * uint(b)], n = grooveWord[blk + 7u + 2u * uint(b)];
-      uint list = blk + grooveWord[blk + 2u] + start;
+      uint n;
+      uint list = gBinList(c, blk, qe, n);
       for (uint k = 0u; k < n; ++k) {
         GPiece p = gPiece(blk, grooveWord[list + k]);
         float ps, px;

@@ -120,9 +120,37 @@ TEST(GrooveSection, CorruptionIsRefused) {
   b = good;
   word(b, blk, 0);  // a zero grid
   cases.push_back({"zero grid", b});
+  // The sparse bins: the mask, the held bins before each mask word, each held bin's start.
+  uint32_t grid;
+  std::memcpy(&grid, &good[words + 4 * blk], 4);
+  const uint32_t M = gcast::binMaskWords(grid), startsAt = blk + gcast::kBlockHeaderWords + 2 * M;
+  const uint32_t held = listOff - gcast::kBlockHeaderWords - 2 * M - 1;
+  ASSERT_GT(held, 0u);
   b = good;
-  word(b, blk + gcast::kBlockHeaderWords, 0xfffffff0u);  // the first bin's list start
+  word(b, startsAt + held, 0xfffffff0u);  // the lists' end
   cases.push_back({"bin list past the block", b});
+  b = good;
+  word(b, startsAt + held - 1, 0xfffffff0u);  // the last held bin's start, past its end
+  cases.push_back({"bin list ends before it starts", b});
+  b = good;
+  for (uint32_t w = 0; w < M; ++w) {  // one held bin fewer in the mask than its counts say
+    uint32_t m;
+    std::memcpy(&m, &b[words + 4 * (blk + gcast::kBlockHeaderWords + w)], 4);
+    if (m == 0) continue;
+    word(b, blk + gcast::kBlockHeaderWords + w, m & (m - 1));
+    break;
+  }
+  cases.push_back({"mask and counts disagree", b});
+  b = good;
+  h.jsonRawBytes = 0xffffffffu;  // a huge groove list stated: refused before it is allocated
+  std::memcpy(b.data(), &h, sizeof(h));
+  cases.push_back({"huge JSON size", b});
+  b = good;
+  std::memcpy(&h, good.data(), sizeof(h));
+  ASSERT_GT(h.jsonRawBytes, 0u) << "the JSON is stored compressed";
+  h.jsonRawBytes -= 1;
+  std::memcpy(b.data(), &h, sizeof(h));
+  cases.push_back({"JSON size not the frame's", b});
   b = good;
   word(b, blk + listOff, 0xffffu);  // the first list entry: a piece it lacks
   cases.push_back({"bin names a missing piece", b});
