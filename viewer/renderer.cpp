@@ -499,8 +499,10 @@ static uint64_t uploadBlocks(uint32_t cellCount, const uint32_t* entries, uint64
   return (uint64_t(cellCount) + wordCount) * 4;
 }
 
-// grooves' deferred pixels (grooves_defer.glsl): slots a pixel; the lists' words before their tiles.
-constexpr int kDeferSlots = 3;
+// grooves' deferred pixels (grooves_defer.glsl): slots a pixel (8 bytes each: 4 leave 42 of 17653
+// deferred pixels of Igea's test views to their height field, 3 left 200); the lists' words
+// before their tiles.
+constexpr int kDeferSlots = 4;
 constexpr int kDeferHead = 4 * 2 * kDeferSlots + 2;
 static std::string deferDefines() { return "#define DEFER_SLOTS " + std::to_string(kDeferSlots) + "\n"; }
 

@@ -508,12 +508,13 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
   }
   std::printf("[grooves-gl] igea: %zu pixels away from the grooves, %zu the same as parallax; %zu on them, %zu changed\n", far,
               farSame, near, nearChanged);
-  // Where several cells' boxes with grooves overlap on a pixel (27 of them here), a fourth cell
-  // finds no slot and draws its height field there.
+  // Where several cells' boxes with grooves overlap on a pixel (27 of them here), a fifth cell
+  // finds no slot and draws its height field there: 42 of 17653 pixels (with 3 slots a pixel,
+  // 200 of 17495).
   std::printf("[grooves-gl] igea: %llu pixels deferred to the carved cast, %llu without a slot\n", (unsigned long long)deferred,
               (unsigned long long)undeferred);
   EXPECT_GT(deferred, 1000u);
-  EXPECT_LE(double(undeferred), 0.03 * double(deferred));
+  EXPECT_LE(double(undeferred), 0.005 * double(deferred));
   EXPECT_GT(far, 10000u);
   EXPECT_GE(double(farSame), 0.999 * double(far));
   EXPECT_GT(nearChanged, 0u);
