@@ -370,9 +370,9 @@ Result<SectionView> readSection(const PackReader& pack) {
   for (uint32_t i = 0; i < h.cellCount; ++i) {
     const uint32_t b = v.entries[i];
     if (b == kNoEntry) continue;
-    if (uint64_t(b) + kBlockHeaderWords > W) return Status::badInput(where + "cell " + std::to_string(i) + "'s block is past the words");
-    const uint32_t g = v.words[b], n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
     const std::string cellWhere = where + "cell " + std::to_string(i);
+    if (uint64_t(b) + kBlockHeaderWords > W) return Status::badInput(cellWhere + "'s block is past the words");
+    const uint32_t g = v.words[b], n = v.words[b + 1], lo = v.words[b + 2], po = v.words[b + 3];
     if (g < 1 || g > kMaxGrid || po < lo || uint64_t(b) + po + uint64_t(n) * kPieceWords > W)
       return Status::badInput(cellWhere + "'s block is malformed");
     // The bins' mask, the counts before each of its words, the held bins' starts.
@@ -395,7 +395,7 @@ Result<SectionView> readSection(const PackReader& pack) {
       if (v.words[b + lo + q] >= n) return Status::badInput(cellWhere + ": a bin names a piece it lacks");
     for (uint32_t q = 0; q < n; ++q)
       if (uint64_t(v.words[b + po + q * kPieceWords + 12]) + kProfileSamples > uint64_t(h.grooveCount) * kProfileSamples)
-        return Status::badInput(where + "cell " + std::to_string(i) + ": a piece names a profile it lacks");
+        return Status::badInput(cellWhere + ": a piece names a profile it lacks");
   }
   const char* json = reinterpret_cast<const char*>(v.words + W);
   if (h.jsonRawBytes == 0) {
