@@ -53,6 +53,10 @@ const char* kHelp =
     "                         the parallax march (default 8)\n"
     "  --compare-skips        also run parallax with each skip turned off, one at a time, and the\n"
     "                         auto mode (small boxes as slices) to show what that switch saves\n"
+    "  --interleave           run the configurations frame by frame in turn instead of one after\n"
+    "                         the other: a drift of the machine's speed then falls on all of them\n"
+    "                         alike, so their ratios hold (use it to compare modes on a shared or\n"
+    "                         software renderer)\n"
     "  --no-groove-aa         grooves mode: one ray a pixel also where a groove is under 2 pixels wide\n"
     "  --no-color             ignore scan colours (as eval does)\n"
     "  --no-frustum-cull, --no-backface-cull, --no-adaptive-steps, --no-splats, --no-sort\n"
@@ -103,9 +107,10 @@ std::string summaryJson(const Summary& s) {
   return b;
 }
 
-// One configuration's frames: warm-up, then timed frames cycling over the cameras.
+// One configuration's frames and what they measured.
 struct Row {
   Config config;
+  std::vector<double> gpuMs, cpuMs;  // per timed frame
   Summary gpu, cpu;
   double drawn = 0, culled = 0, splats = 0, sliced = 0, frags = 0, submitted = 0;
   double uploads = 0, evicted = 0, coarsened = 0, missing = 0, residentBytes = 0, heldBytes = 0;  // --gpu-budget, per frame
@@ -115,61 +120,58 @@ struct Row {
   RenderMode drawn_mode = RenderMode::kParallax;
 };
 
-Status benchConfig(Renderer& renderer, const std::vector<Camera>& cams, const Config& c, size_t ci, int64_t warmup,
-                   int64_t frames, std::ostringstream& csv, Row& row, const std::function<void()>& tick) {
+// Frame f of a configuration (the cameras cycled), untimed.
+Status warmFrame(Renderer& renderer, const std::vector<Camera>& cams, const Config& c, int64_t f) {
   FrameResult fr;
-  row.config = c;
-  for (int64_t f = 0; f < warmup; ++f) {
-    SA_RETURN_IF_ERROR(renderer.render(cams[size_t(f) % cams.size()], c.settings, fr, 0u));
-    tick();
-  }
-  std::vector<double> gpu, cpu;
-  for (int64_t f = 0; f < frames; ++f) {
-    const size_t cam = size_t(f) % cams.size();
-    SA_RETURN_IF_ERROR(renderer.render(cams[cam], c.settings, fr, 0u));
-    tick();
-    const FrameStats& st = fr.stats;
-    gpu.push_back(st.gpuMs);
-    cpu.push_back(st.cpuMs);
-    row.drawn += st.drawn;
-    row.culled += st.culled;
-    row.splats += st.splats;
-    row.sliced += st.sliced;
-    row.frags += double(st.fragments);
-    row.submitted += st.submitted;
-    row.uploads += st.uploads;
-    row.evicted += st.evicted;
-    row.coarsened += st.coarsened;
-    row.missing += st.missing;
-    row.residentBytes += double(st.residentBytes);
-    row.heldBytes += double(st.heldBytes);
-    row.deferred += double(st.deferred);
-    row.undeferred += double(st.undeferred);
-    csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f << ","
-        << cam << "," << st.gpuMs << "," << st.cpuMs << "," << st.submitted << "," << st.culled << "," << st.drawn << ","
-        << st.inside << "," << st.splats << "," << st.points << "," << st.fragments << "\n";
-  }
-  const double n = double(frames);
-  row.drawn /= n;
-  row.culled /= n;
-  row.splats /= n;
-  row.sliced /= n;
-  row.frags /= n;
-  row.submitted /= n;
-  for (double* v : {&row.uploads, &row.evicted, &row.coarsened, &row.missing, &row.residentBytes, &row.heldBytes, &row.deferred,
-                    &row.undeferred})
+  return renderer.render(cams[size_t(f) % cams.size()], c.settings, fr, 0u);
+}
+
+// Timed frame f of configuration ci: its times and counts added to the row, a CSV line.
+Status timedFrame(Renderer& renderer, const std::vector<Camera>& cams, size_t ci, int64_t f, std::ostringstream& csv, Row& row) {
+  const Config& c = row.config;
+  const size_t cam = size_t(f) % cams.size();
+  FrameResult fr;
+  SA_RETURN_IF_ERROR(renderer.render(cams[cam], c.settings, fr, 0u));
+  const FrameStats& st = fr.stats;
+  row.gpuMs.push_back(st.gpuMs);
+  row.cpuMs.push_back(st.cpuMs);
+  row.drawn += st.drawn;
+  row.culled += st.culled;
+  row.splats += st.splats;
+  row.sliced += st.sliced;
+  row.frags += double(st.fragments);
+  row.submitted += st.submitted;
+  row.uploads += st.uploads;
+  row.evicted += st.evicted;
+  row.coarsened += st.coarsened;
+  row.missing += st.missing;
+  row.residentBytes += double(st.residentBytes);
+  row.heldBytes += double(st.heldBytes);
+  row.deferred += double(st.deferred);
+  row.undeferred += double(st.undeferred);
+  row.invocations = st.fragmentsAreInvocations;
+  row.drawn_mode = st.drawnMode;
+  csv << ci << "," << modeName(c.settings.mode) << "," << c.settings.iterations << "," << c.skips << "," << f << ","
+      << cam << "," << st.gpuMs << "," << st.cpuMs << "," << st.submitted << "," << st.culled << "," << st.drawn << ","
+      << st.inside << "," << st.splats << "," << st.points << "," << st.fragments << "\n";
+  return Status::ok();
+}
+
+// After the timed frames: per-frame means, the time summaries, and one counted frame per camera.
+Status finishRow(Renderer& renderer, const std::vector<Camera>& cams, Row& row) {
+  const double n = double(std::max<size_t>(row.cpuMs.size(), 1));
+  for (double* v : {&row.drawn, &row.culled, &row.splats, &row.sliced, &row.frags, &row.submitted, &row.uploads, &row.evicted,
+                    &row.coarsened, &row.missing, &row.residentBytes, &row.heldBytes, &row.deferred, &row.undeferred})
     *v /= n;
-  row.gpu = summarize(gpu);
-  row.cpu = summarize(cpu);
-  row.invocations = fr.stats.fragmentsAreInvocations;
-  row.drawn_mode = fr.stats.drawnMode;
-  if (c.settings.mode != RenderMode::kPoints) {
-    RenderSettings counted = c.settings;
-    counted.countWork = true;
-    for (const Camera& cam : cams) {
-      SA_RETURN_IF_ERROR(renderer.render(cam, counted, fr, 0u));
-      row.work.add(fr.stats.work);
-    }
+  row.gpu = summarize(row.gpuMs);
+  row.cpu = summarize(row.cpuMs);
+  if (row.config.settings.mode == RenderMode::kPoints) return Status::ok();
+  RenderSettings counted = row.config.settings;
+  counted.countWork = true;
+  FrameResult fr;
+  for (const Camera& cam : cams) {
+    SA_RETURN_IF_ERROR(renderer.render(cam, counted, fr, 0u));
+    row.work.add(fr.stats.work);
   }
   return Status::ok();
 }
@@ -365,22 +367,35 @@ std::vector<Config> makeConfigs(const RenderSettings& base, const std::vector<Re
 }
 
 // Every configuration's frames (on a terminal a bar with the time left): its CSV rows, its JSON
-// object and its table row.
+// object and its table row. One configuration after the other, or with `interleave` frame by frame
+// in turn (each configuration's frame f, then each one's f + 1), so that a drift of the machine's
+// speed during the run falls on every configuration alike and their ratio holds.
 Status runConfigs(Renderer& renderer, const PackReader& pack, const std::vector<Camera>& cams,
-                  const std::vector<Config>& configs, int64_t warmup, int64_t frames, bool quiet, bool budgeted,
-                  std::ostringstream& csv, std::ostringstream& json, std::vector<Row>& rows) {
+                  const std::vector<Config>& configs, int64_t warmup, int64_t frames, bool interleave, bool quiet,
+                  bool budgeted, std::ostringstream& csv, std::ostringstream& json, std::vector<Row>& rows) {
   Progress progress(!quiet, "bench", "frames");
   const uint64_t totalFrames = uint64_t(frames + warmup) * configs.size();
   uint64_t framesDone = 0;
-  for (size_t ci = 0; ci < configs.size(); ++ci) {
-    Row row;
-    SA_RETURN_IF_ERROR(benchConfig(renderer, cams, configs[ci], ci, warmup, frames, csv, row, [&] {
-      progress("frames", ++framesDone, totalFrames);
-    }));
-    rows.push_back(row);
-    json << (ci ? ", " : "") << rowJson(row, renderer, pack, budgeted);
+  rows.assign(configs.size(), Row{});
+  for (size_t ci = 0; ci < configs.size(); ++ci) rows[ci].config = configs[ci];
+  // Frame f of configuration ci, warm-up frames first.
+  auto frame = [&](size_t ci, int64_t f) -> Status {
+    progress("frames", ++framesDone, totalFrames);
+    return f < warmup ? warmFrame(renderer, cams, configs[ci], f) : timedFrame(renderer, cams, ci, f - warmup, csv, rows[ci]);
+  };
+  const int64_t all = warmup + frames;
+  if (interleave) {
+    for (int64_t f = 0; f < all; ++f)
+      for (size_t ci = 0; ci < configs.size(); ++ci) SA_RETURN_IF_ERROR(frame(ci, f));
+  } else {
+    for (size_t ci = 0; ci < configs.size(); ++ci)
+      for (int64_t f = 0; f < all; ++f) SA_RETURN_IF_ERROR(frame(ci, f));
   }
   progress.finish();
+  for (size_t ci = 0; ci < configs.size(); ++ci) {
+    SA_RETURN_IF_ERROR(finishRow(renderer, cams, rows[ci]));
+    json << (ci ? ", " : "") << rowJson(rows[ci], renderer, pack, budgeted);
+  }
   return Status::ok();
 }
 
@@ -409,7 +424,7 @@ int cmdBench(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
                      {"path", "orbit", "zoom", "size", "fov", "up", "warmup", "frames", "mode", "iterations", "slices", "auto-pixels", "gdm-elsewhere", "csv", "gpu-budget"},
-                     {"compare-skips", "stream", "budget-error", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
+                     {"compare-skips", "interleave", "stream", "budget-error", "no-color", "no-groove-aa", "no-frustum-cull", "no-backface-cull", "no-adaptive-steps", "no-splats",
                       "no-sort", "json", "quiet", "help"},
                      {{"q", "quiet"}, {"h", "help"}});
   if (a.flag("help")) {
@@ -483,7 +498,7 @@ int cmdBench(int argc, char** argv) {
   if (a.flag("stream")) json << ", \"stream\": " << streamJson(streamed, pack.meta().cellCount);
   json << ", \"configs\": [";
   std::vector<Row> rows;
-  s = runConfigs(renderer, pack, cams, configs, *warmup, *frames, quiet, budget.bytes > 0, csv, json, rows);
+  s = runConfigs(renderer, pack, cams, configs, *warmup, *frames, a.flag("interleave"), quiet, budget.bytes > 0, csv, json, rows);
   if (!s) return reportError(s);
   if (!quiet) printTable(rows, ctx.renderer());
   json << "]";

@@ -155,6 +155,23 @@ TEST(Cli, PackInfoBenchEvalJson) {
   for (std::string l; std::getline(csv, l);) ++lines;
   EXPECT_EQ(lines, 1u + 10u * 4u);  // header + frames
 
+  // --interleave: the same configurations and counts, their frames taken in turn (the CSV's
+  // config column cycles), so a drift of the machine's speed falls on each alike.
+  CmdResult il = run("bench " + d.file("ico.hfa") + " --orbit 4 --size 64x64 --warmup 1 --frames 4 --mode parallax,points "
+                     "--iterations 4,12 --interleave --json --csv " + d.file("il.csv"));
+  ASSERT_EQ(il.code, 0) << il.out;
+  auto ij = nlohmann::json::parse(il.out);
+  ASSERT_EQ(ij["configs"].size(), 3u);
+  for (size_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(ij["configs"][k]["mode"], bj["configs"][k]["mode"]);
+    EXPECT_EQ(ij["configs"][k]["fragments"].get<double>(), bj["configs"][k]["fragments"].get<double>()) << k;
+  }
+  std::ifstream icsv(d.file("il.csv"));
+  std::vector<std::string> order;
+  for (std::string l; std::getline(icsv, l);) order.push_back(l.substr(0, l.find(',')));
+  ASSERT_EQ(order.size(), 1u + 4u * 3u);
+  for (size_t i = 1; i < order.size(); ++i) EXPECT_EQ(order[i], std::to_string((i - 1) % 3)) << i;
+
   CmdResult e = run("eval " + d.file("ico.hfa") + " --reference " + d.file("ico.ply") +
               " --orbit 3 --size 96x96 --mode parallax,points --iterations 12 --json");
   ASSERT_EQ(e.code, 0) << e.out;
