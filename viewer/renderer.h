@@ -63,10 +63,12 @@ struct RenderSettings {
   // Self-shadowing (001 §3.2): a second cast from each hit toward the light (lightDir; needs
   // headLight off), within the hit's cell, by the mode's own cast (vdm: a lookup).
   bool shadows = false;
-  // grooves mode: grooves under two pixels wide are anti-aliased over the pixel's footprint by
-  // this many rays across them (off: one ray per pixel, as wide grooves).
+  // grooves mode: grooves under two pixels wide are anti-aliased over the pixel's footprint, the
+  // part of it that lands inside the groove by this many rays (off: one ray per pixel, as wide
+  // grooves). 4 give 0.006 mean luminance error against 16-sample supersampling at 0.3 pixels
+  // (GroovesGl.NarrowGroovesAreAntiAliasedLikeSupersampling), 8 the same.
   bool grooveAA = true;
-  int grooveSamples = 8;
+  int grooveSamples = 4;
   // gdm mode: the cells that are height fields (no voxel grid) are drawn by parallax's programs
   // (the march, iterations) instead of exact's traversal: gdm then differs from parallax only in
   // the forced cells (whose rays that pass no voxel near the samples still take exact).

@@ -344,7 +344,7 @@ void drawLodSettings(AppState& s) {
     ImGui::Checkbox("height-field cells by parallax (else exact)", &s.rs.gdmParallaxElsewhere);
   if (s.rs.mode == RenderMode::kGrooves) {
     ImGui::Checkbox("anti-alias grooves under 2 px", &s.rs.grooveAA);
-    if (s.rs.grooveAA) ImGui::SliderInt("rays across a narrow groove", &s.rs.grooveSamples, 2, 32);
+    if (s.rs.grooveAA) ImGui::SliderInt("rays inside a narrow groove", &s.rs.grooveSamples, 2, 32);
   }
 }
 

@@ -607,12 +607,37 @@ vec3 gFootprintSample(Cell c, GPiece p, vec3 C, float ra, float rx, vec3 o, vec3
   return shade(albedo, nWorld, world);
 }
 
+// The integral from 0 to s of the footprint's weight across a groove: the pixel square's chord
+// length across the groove's screen direction, 1 out to lo and falling to 0 at hi (odd in s).
+float gChordIntegral(float s, float lo, float hi) {
+  float a = min(abs(s), hi), r = hi - a;
+  float w = a <= lo ? a : lo + 0.5 * ((hi - lo) * (hi - lo) - r * r) / max(hi - lo, 1e-6);
+  return s < 0.0 ? -w : w;
+}
+
+// The offsets s (pixels across the groove's screen direction) of the footprint's rays
+// o + t (d + qs s) that meet piece p's rim plane (normal N through C) within its half width: where
+// x(s) = x0 + a (ga + de s) / (al + be s), across the line, is -hw and hw, clamped to [-hi, hi].
+// The whole [-hi, hi] where the rays do not all meet the plane from one side.
+vec2 gInsideSpan(GPiece p, vec3 C, vec3 N, vec3 o, vec3 d, vec3 qs, float hi) {
+  vec2 n = vec2(-p.e.y, p.e.x);
+  float a = dot(N, C - o), al = dot(N, d), be = dot(N, qs);
+  float x0 = dot(o.xy - C.xy, n), ga = dot(d.xy, n), de = dot(qs.xy, n);
+  if (!(a / (al - be * hi) > 0.0 && a / (al + be * hi) > 0.0)) return vec2(-hi, hi);
+  vec2 X = vec2(-p.hw, p.hw) - x0;
+  vec2 den = a * de - X * be;
+  if (!(abs(den.x) > 1e-20 && abs(den.y) > 1e-20)) return vec2(-hi, hi);
+  vec2 sx = (X * al - a * ga) / den;
+  return clamp(vec2(min(sx.x, sx.y), max(sx.x, sx.y)), -hi, hi);
+}
+
 // Anti-aliasing of grooves narrower than two pixels (003 eq. 6's footprint area ratios, integrated
-// numerically): the piece gAAPiece picks (castCell's, where it chose one for this pixel);
-// grooveSamples rays spread across it over the pixel (weights: the pixel square's chord lengths
-// across the groove's screen direction), each followed down the groove's profile in its
-// cross-section and shaded where it lands; their weighted mean is the pixel's colour. (Only one
-// groove: where two narrow ones cross inside a pixel, one of them.)
+// numerically): the piece gAAPiece picks (castCell's, where it chose one for this pixel). Across
+// the groove's screen direction the pixel square's chord lengths weight the footprint. The stretch
+// of it whose rays land inside the groove (gInsideSpan) takes grooveSamples rays, each followed
+// down the groove's profile in its cross-section and shaded where it lands; the rest lands on the
+// rim's tangent plane, one colour. The weighted mean is the pixel's colour. (Only one groove:
+// where two narrow ones cross inside a pixel, one of them.)
 vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   uint blk = grooveEntry[cell];
   if (!grooveAA || blk == kNoGrooves) return color;
@@ -630,21 +655,27 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   g2 = normalize(g2);
   vec2 q2 = vec2(-g2.y, g2.x);
   float hi = 0.5 * (abs(q2.x) + abs(q2.y)), lo = 0.5 * abs(abs(q2.x) - abs(q2.y));
-  vec3 qf = R * q2.x + U * q2.y;
+  vec3 qs = (R * q2.x + U * q2.y) * pixelAngle;
   vec3 rel = cellRelativeToCamera(c);
   vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
+  vec2 rimSlope = p.e * ra + vec2(-p.e.y, p.e.x) * rx;
+  vec2 span = gInsideSpan(p, C, vec3(-rimSlope, 1.0), o, d, qs, hi);
+  float wIn = gChordIntegral(span.y, lo, hi) - gChordIntegral(span.x, lo, hi), wOut = hi + lo - wIn;
   vec3 sum = vec3(0.0);
   float wsum = 0.0;
   int n = clamp(grooveSamples, 1, 64);
   for (int k = 0; k < n; ++k) {
-    float sg = (-1.0 + (2.0 * float(k) + 1.0) / float(n)) * hi;
+    float sg = mix(span.x, span.y, (float(k) + 0.5) / float(n));
     float wt = abs(sg) <= lo ? 1.0 : (hi - abs(sg)) / max(hi - lo, 1e-6);
-    vec3 col = gFootprintSample(c, p, C, ra, rx, o, normalize(d + qf * (sg * pixelAngle)), albedo, world);
+    vec3 col = gFootprintSample(c, p, C, ra, rx, o, normalize(d + qs * sg), albedo, world);
     if (col.x < 0.0) continue;
     sum += wt * col;
     wsum += wt;
   }
-  return wsum > 0.0 ? sum / wsum : color;
+  if (!(wsum > 0.0)) return color;
+  vec3 nRim = normalize(vec3(-rimSlope, 1.0));
+  vec3 rim = shade(albedo, c.axisU.xyz * nRim.x + c.axisV.xyz * nRim.y + c.axisW.xyz * nRim.z, world);
+  return (sum / wsum * wIn + rim * wOut) / max(wIn + wOut, 1e-12);
 }
 #endif
