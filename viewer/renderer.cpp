@@ -125,10 +125,10 @@ struct Renderer::Gl {
   // The same with self-shadowing (SHADOWS: llvmpipe runs a shadow ray's code on every pixel, asked
   // for or not), linked when a frame first asks for shadows.
   GLuint shadowFront[kRenderModes] = {}, shadowInside[kRenderModes] = {};
-  // grooves' second pass over the pixels the first deferred (grooves_defer.glsl): class 0 (the
-  // carved cast), class 1 (the march's hit stands, the footprint's anti-aliasing), class 0 with
-  // self-shadowing (linked when first asked for).
-  GLuint groovePixel[3] = {};
+  // grooves' second pass over the pixels the first deferred (grooves_defer.glsl), packed densely:
+  // class 0 (the carved cast), class 1 (the march's hit stands, the footprint's anti-aliasing),
+  // class 0 with self-shadowing (linked when first asked for); the resolve onto the frame.
+  GLuint groovePixel[3] = {}, grooveResolve = 0;
   GLuint splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
@@ -136,10 +136,13 @@ struct Renderer::Gl {
   GLuint gdmEntryBuf = 0, gdmWordBuf = 0;            // gdm: per-cell block offsets, the voxel grids
   GLuint grooveEntryBuf = 0, grooveWordBuf = 0;      // grooves: per-cell block offsets, profiles and blocks
   GLuint grooveFieldBuf = 0;                         // grooves: the cells' gap fields (gcast::gapField)
-  // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): two slots a pixel,
-  // flags per 4x4 tile, the lists of tiles and their indirect draws.
+  // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): slots a pixel,
+  // flags per 4x4 tile, the lists of tiles and of pixels and their indirect draws; the pack
+  // target the cast draws a list's pixels into (colour, linear depth, normal, cell, as fbo's).
   GLuint deferSlotsTex = 0, deferTilesTex = 0, deferBuf = 0;
-  uint32_t deferCapacity = 0;  // tiles a slot's list holds
+  uint32_t deferCapacity = 0, packCapacity = 0;  // tiles, pixels a list holds
+  GLuint packFbo = 0, packTex[4] = {};
+  int packW = 0, packH = 0;
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;  // heights: R16UI, --gpu-budget RG16UI (with the masks)
   std::vector<uint16_t> heightMask;  // --gpu-budget: a level's heights and masks interleaved for upload
@@ -167,10 +170,12 @@ struct Renderer::Gl {
   void releaseTargets() {
     GLuint fbos[] = {fbo, postFbo};
     glDeleteFramebuffers(2, fbos);
-    GLuint tex[] = {colorTex, linearTex, postTex, deferSlotsTex, deferTilesTex};
-    glDeleteTextures(5, tex);
+    GLuint tex[] = {colorTex, linearTex, postTex, deferSlotsTex, deferTilesTex, packTex[0], packTex[1], packTex[2], packTex[3]};
+    glDeleteTextures(9, tex);
     glDeleteBuffers(1, &deferBuf);
-    deferSlotsTex = deferTilesTex = deferBuf = 0;
+    glDeleteFramebuffers(1, &packFbo);
+    deferSlotsTex = deferTilesTex = deferBuf = packFbo = 0;
+    for (GLuint& t : packTex) t = 0;
     GLuint rb[] = {depthRb, normalRb, cellRb};
     glDeleteRenderbuffers(3, rb);
     fbo = postFbo = colorTex = linearTex = postTex = depthRb = normalRb = cellRb = 0;
@@ -184,7 +189,7 @@ struct Renderer::Gl {
   int fbW = 0, fbH = 0;
   ~Gl() {
     streamer.reset();  // its threads write levels and read the pack: join them before anything goes
-    for (GLuint p : {splat, points, edl, boxes, groovePixel[0], groovePixel[1], groovePixel[2]})
+    for (GLuint p : {splat, points, edl, boxes, groovePixel[0], groovePixel[1], groovePixel[2], grooveResolve})
       if (p) glDeleteProgram(p);
     for (int m = 0; m < kRenderModes; ++m)
       for (GLuint p : {front[m], inside[m], shadowFront[m], shadowInside[m]})
@@ -501,9 +506,12 @@ static uint64_t uploadBlocks(uint32_t cellCount, const uint32_t* entries, uint64
 
 // grooves' deferred pixels (grooves_defer.glsl): slots a pixel (8 bytes each: 4 leave 42 of 17653
 // deferred pixels of Igea's test views to their height field, 3 left 200); the lists' words
-// before their tiles.
+// before their tiles and pixels (defer_lists.glsl): two draw commands and a pixel count a list,
+// then the pixels deferred and those without a slot.
 constexpr int kDeferSlots = 4;
-constexpr int kDeferHead = 4 * 2 * kDeferSlots + 2;
+constexpr int kDeferLists = 2 * kDeferSlots;
+constexpr int kDeferCountAt = 4 * kDeferLists * 2 + kDeferLists;
+constexpr int kDeferHead = kDeferCountAt + 2;
 static std::string deferDefines() { return "#define DEFER_SLOTS " + std::to_string(kDeferSlots) + "\n"; }
 
 // A surface mode's box programs: front faces (the camera outside the box) or back faces (inside);
@@ -528,7 +536,7 @@ Status Renderer::ensureShadowPrograms(RenderMode m) {
     SA_RETURN_IF_ERROR(link("box.vert", "parallax.frag", boxDefines(k, true) + maskDefines() + "#define SHADOWS 1\n", g.shadowInside[i], mi.castUnit));
   }
   if (m == RenderMode::kGrooves && g.groovePixel[0] && !g.groovePixel[2])
-    SA_RETURN_IF_ERROR(link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define SHADOWS 1\n" + deferDefines(), g.groovePixel[2],
+    SA_RETURN_IF_ERROR(link("defer_pack.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define SHADOWS 1\n" + deferDefines(), g.groovePixel[2],
                             modeInfo(m).castUnit));
   return Status::ok();
 }
@@ -545,9 +553,10 @@ Status Renderer::initGrooves(const PackReader& pack, const gcast::SectionView& v
   grooveBytes_ += field.size() * 4;
   gpuBytes_ += grooveBytes_;
   const char* unit = modeInfo(RenderMode::kGrooves).castUnit;
-  SA_RETURN_IF_ERROR(link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n" + deferDefines(), g.groovePixel[0], unit));
-  return link("defer_tiles.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define GROOVES_HIT_STANDS 1\n" + deferDefines(),
-              g.groovePixel[1], unit);
+  SA_RETURN_IF_ERROR(link("defer_pack.vert", "parallax.frag", "#define PIXEL_RAYS 1\n" + deferDefines(), g.groovePixel[0], unit));
+  SA_RETURN_IF_ERROR(link("defer_pack.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define GROOVES_HIT_STANDS 1\n" + deferDefines(),
+                          g.groovePixel[1], unit));
+  return link("defer_tiles.vert", "defer_resolve.frag", deferDefines(), g.grooveResolve);
 }
 
 // Every surface mode this pack can draw: its programs and its baked sections on the GPU.
@@ -770,22 +779,55 @@ Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint
   return Status::ok();
 }
 
+// A render target's texture, read back texel by texel (no filtering).
+static GLuint targetTexture(GLenum format, int width, int height) {
+  GLuint t = 0;
+  glCreateTextures(GL_TEXTURE_2D, 1, &t);
+  glTextureStorage2D(t, 1, format, width, height);
+  glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  return t;
+}
+
+// grooves' deferred pixels at the frame's size (grooves_defer.glsl): the slots, the tile flags,
+// the lists, and the pack target (a list holds each pixel at most once: the frame's pixels,
+// rounded up to 4x4 blocks), with the frame's formats.
+Status Renderer::createDeferTargets(int width, int height) {
+  Gl& g = *gl_;
+  const GLsizei tw = (width + 3) / 4, th = (height + 3) / 4;
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.deferSlotsTex);
+  glTextureStorage3D(g.deferSlotsTex, 1, GL_R32UI, width, height, 2 * kDeferSlots);
+  glCreateTextures(GL_TEXTURE_2D, 1, &g.deferTilesTex);
+  glTextureStorage2D(g.deferTilesTex, 1, GL_R32UI, tw, th);
+  g.deferCapacity = uint32_t(tw) * uint32_t(th);
+  g.packW = 4 * tw;
+  g.packH = 4 * th;
+  g.packCapacity = 16 * g.deferCapacity;
+  glCreateBuffers(1, &g.deferBuf);
+  glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + kDeferLists * (uint64_t(g.deferCapacity) + g.packCapacity)) * 4), nullptr,
+                       GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+  const GLenum formats[4] = {GL_RGBA8, GL_R32F, GL_RGBA16F, GL_R32UI};  // colorTex, linearTex, normalRb, cellRb
+  glCreateFramebuffers(1, &g.packFbo);
+  for (int i = 0; i < 4; ++i) {
+    g.packTex[i] = targetTexture(formats[i], g.packW, g.packH);
+    glNamedFramebufferTexture(g.packFbo, GLenum(GL_COLOR_ATTACHMENT0 + i), g.packTex[i], 0);
+  }
+  const GLenum bufs[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2, GL_COLOR_ATTACHMENT3};
+  glNamedFramebufferDrawBuffers(g.packFbo, 4, bufs);
+  if (glCheckNamedFramebufferStatus(g.packFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    return Status::internal("grooves' pack target incomplete at " + std::to_string(g.packW) + "x" + std::to_string(g.packH));
+  return Status::ok();
+}
+
 // Render targets at the camera's size: colour, linear depth, normals, cell ids, depth buffer,
 // and the post-processing target.
 Status Renderer::ensureTargets(int width, int height) {
   Gl& g = *gl_;
   if (g.fbW == width && g.fbH == height) return Status::ok();
   g.releaseTargets();
-  auto texture = [&](GLenum format) {
-    GLuint t = 0;
-    glCreateTextures(GL_TEXTURE_2D, 1, &t);
-    glTextureStorage2D(t, 1, format, width, height);
-    glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-    glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    return t;
-  };
+  auto texture = [&](GLenum format) { return targetTexture(format, width, height); };
   g.colorTex = texture(GL_RGBA8);
   g.linearTex = texture(GL_R32F);
   g.postTex = texture(GL_RGBA8);
@@ -803,17 +845,7 @@ Status Renderer::ensureTargets(int width, int height) {
   glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
   glCreateFramebuffers(1, &g.postFbo);
   glNamedFramebufferTexture(g.postFbo, GL_COLOR_ATTACHMENT0, g.postTex, 0);
-  if (g.grooveEntryBuf) {  // grooves' deferred pixels (grooves_defer.glsl)
-    const GLsizei tw = (width + 3) / 4, th = (height + 3) / 4;
-    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.deferSlotsTex);
-    glTextureStorage3D(g.deferSlotsTex, 1, GL_R32UI, width, height, 2 * kDeferSlots);
-    glCreateTextures(GL_TEXTURE_2D, 1, &g.deferTilesTex);
-    glTextureStorage2D(g.deferTilesTex, 1, GL_R32UI, tw, th);
-    g.deferCapacity = uint32_t(tw) * uint32_t(th);
-    glCreateBuffers(1, &g.deferBuf);
-    glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + 2 * kDeferSlots * uint64_t(g.deferCapacity)) * 4), nullptr,
-                         GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
-  }
+  if (g.grooveEntryBuf) SA_RETURN_IF_ERROR(createDeferTargets(width, height));
   if (glCheckNamedFramebufferStatus(g.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE ||
       glCheckNamedFramebufferStatus(g.postFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
     return Status::internal("framebuffer incomplete at " + std::to_string(width) + "x" + std::to_string(height));
@@ -1043,8 +1075,8 @@ void Renderer::beginGrooves(const RenderSettings& s, unsigned frontProgram, unsi
   for (int slot = 0; slot < kDeferSlots; ++slot)  // the cell layers (the hits are written when a slot is taken)
     glClearTexSubImage(g.deferSlotsTex, 0, 0, 0, 2 * slot, g.fbW, g.fbH, 1, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
   glClearTexImage(g.deferTilesTex, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
-  GLuint head[kDeferHead] = {};  // each list: a point a tile, no tiles yet; nothing deferred
-  for (int l = 0; l < 2 * kDeferSlots; ++l) head[4 * l] = 1;
+  GLuint head[kDeferHead] = {};  // each list: a point a tile or block, none yet; nothing deferred
+  for (int l = 0; l < 2 * kDeferLists; ++l) head[4 * l] = 1;
   glNamedBufferSubData(g.deferBuf, 0, sizeof(head), head);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, g.grooveFieldBuf);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.deferBuf);
@@ -1052,39 +1084,65 @@ void Renderer::beginGrooves(const RenderSettings& s, unsigned frontProgram, unsi
   glBindImageTexture(4, g.deferTilesTex, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
   for (GLuint p : {GLuint(frontProgram), GLuint(insideProgram)}) {
     glProgramUniform1ui(p, glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
+    glProgramUniform1ui(p, glGetUniformLocation(p, "packCapacity"), g.packCapacity);
     glProgramUniform1i(p, glGetUniformLocation(p, "deferAll"), s.shadows && !s.headLight ? 1 : 0);
   }
 }
 
-// grooves' second pass: each list's tiles by its class's program.
+// grooves' second pass: per list, its class's cast over the list's pixels packed into the pack
+// target, then the resolve over the list's tiles of the frame (grooves_defer.glsl).
 void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s) {
   Gl& g = *gl_;
   glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT);
   glBindBuffer(GL_DRAW_INDIRECT_BUFFER, g.deferBuf);
   glEnable(GL_PROGRAM_POINT_SIZE);
+  const GLuint r = g.grooveResolve;
+  setCommonUniforms(r, f, s);
+  glUniform1ui(glGetUniformLocation(r, "deferCapacity"), g.deferCapacity);
+  glUniform2f(glGetUniformLocation(r, "viewportSize"), float(g.fbW), float(g.fbH));
+  for (int i = 0; i < 4; ++i) glBindTextureUnit(GLuint(4 + i), g.packTex[i]);
   for (int cls = 0; cls < 2; ++cls) {
     const GLuint p = cls == 0 && s.shadows && !s.headLight ? g.groovePixel[2] : g.groovePixel[cls];
     setCommonUniforms(p, f, s);
     glUniform1ui(glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
+    glUniform1ui(glGetUniformLocation(p, "packCapacity"), g.packCapacity);
     glUniform1ui(glGetUniformLocation(p, "deferClass"), GLuint(cls));
-    glUniform2f(glGetUniformLocation(p, "viewportSize"), float(g.fbW), float(g.fbH));
+    glUniform2i(glGetUniformLocation(p, "packSize"), g.packW, g.packH);
     glUniform3fv(glGetUniformLocation(p, "rayBase"), 1, f.rayBase.data());
     glUniform3fv(glGetUniformLocation(p, "rayDx"), 1, f.rayDx.data());
     glUniform3fv(glGetUniformLocation(p, "rayDy"), 1, f.rayDy.data());
-    for (int slot = 0; slot < kDeferSlots; ++slot) {
-      const int list = 2 * slot + cls;
-      glUniform1i(glGetUniformLocation(p, "deferSlot"), slot);
-      glUniform1i(glGetUniformLocation(p, "deferList"), list);
-      glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(list) * 16));
-    }
+    for (int slot = 0; slot < kDeferSlots; ++slot) drawDeferredList(p, 2 * slot + cls, slot, cls);
   }
+  glViewport(0, 0, g.fbW, g.fbH);
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
   glDisable(GL_PROGRAM_POINT_SIZE);
   glBindBuffer(GL_DRAW_INDIRECT_BUFFER, 0);
 }
 
+// One list: the cast into the pack target (no depth there: each pixel once), then the resolve
+// onto the frame, depth-tested.
+void Renderer::drawDeferredList(unsigned castProgram, int list, int slot, int cls) {
+  Gl& g = *gl_;
+  glBindFramebuffer(GL_FRAMEBUFFER, g.packFbo);
+  glViewport(0, 0, g.packW, g.packH);
+  glUseProgram(castProgram);
+  glUniform1i(glGetUniformLocation(castProgram, "deferSlot"), slot);
+  glUniform1i(glGetUniformLocation(castProgram, "deferList"), list);
+  glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(kDeferLists + list) * 16));
+  glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glViewport(0, 0, g.fbW, g.fbH);
+  const GLuint r = g.grooveResolve;
+  glUseProgram(r);
+  glUniform1i(glGetUniformLocation(r, "deferSlot"), slot);
+  glUniform1ui(glGetUniformLocation(r, "deferClass"), GLuint(cls));
+  glUniform1i(glGetUniformLocation(r, "deferList"), list);
+  glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(list) * 16));
+}
+
 void Renderer::readDeferred(FrameStats& st) {
   GLuint n[2] = {0, 0};
-  glGetNamedBufferSubData(gl_->deferBuf, 4 * 4 * 2 * kDeferSlots, sizeof(n), n);
+  glGetNamedBufferSubData(gl_->deferBuf, 4 * kDeferCountAt, sizeof(n), n);
   st.deferred = n[0];
   st.undeferred = n[1];
 }

@@ -216,6 +216,8 @@ class Renderer {
   void beginGrooves(const RenderSettings& s, unsigned frontProgram, unsigned insideProgram);
   Status ensureShadowPrograms(RenderMode m);
   void drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s);
+  void drawDeferredList(unsigned castProgram, int list, int slot, int cls);
+  Status createDeferTargets(int width, int height);
   void readDeferred(FrameStats& st);
   Status initModes(const PackReader& pack);
   Status initGrooves(const PackReader& pack, const gcast::SectionView& v);

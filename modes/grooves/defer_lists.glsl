@@ -1,9 +1,17 @@
-// The grooves mode's deferred pixels (grooves_defer.glsl): a DrawArraysIndirectCommand per list
-// (list 2 s + k: slot s's tiles holding a pixel of class k; DEFER_SLOTS slots), the pixels deferred
-// and those that found no slot, then each list's 4x4 tiles (y << 16 | x) from list * deferCapacity.
+// The grooves mode's deferred pixels (grooves_defer.glsl). Per list (list 2 s + k: slot s's pixels
+// of class k; DEFER_SLOTS slots): a DrawArraysIndirectCommand over its 4x4 tiles (the resolve,
+// drawn on the frame) and one over the 4x4 blocks of its pixels packed densely (the cast, drawn
+// on the pack target), and its pixel count; then the pixels deferred and those that found no
+// slot; then the items: each list's tiles (y << 16 | x) from list * deferCapacity, each list's
+// pixels (y << 16 | x) from 2 DEFER_SLOTS deferCapacity + list * packCapacity.
 layout(std430, binding = 3) coherent buffer DeferLists {
   uint deferCmd[4 * 2 * DEFER_SLOTS];
+  uint packCmd[4 * 2 * DEFER_SLOTS];
+  uint packCount[2 * DEFER_SLOTS];
   uint deferCount[2];
-  uint deferTile[];
+  uint deferItem[];
 };
 uniform uint deferCapacity;
+uniform uint packCapacity;
+
+uint packedPixelItem(uint list, uint k) { return 2u * uint(DEFER_SLOTS) * deferCapacity + list * packCapacity + k; }

@@ -7,12 +7,15 @@
 //      narrow groove's footprint draws it - the march's hit near the capsules, or in one where
 //      every groove of the cell is narrower than the pixel, the footprint's centre ray's landing
 //      in the groove's cross-section) and the march's hit go to one of DEFER_SLOTS slots of the
-//      pixel, its 4x4 tile to the list of that slot and class;
-//   2. each list's tiles are drawn by its class's program (PIXEL_RAYS; class 1 GROOVES_HIT_STANDS),
-//      each pixel for the cell its slot holds (none, or of the other class: discarded at once),
-//      along the pixel's own ray, from the march's hit.
+//      pixel; the pixel to the list of that slot and class, its 4x4 tile to the list's tiles;
+//   2. per list: the cast (PIXEL_RAYS, its class's program; class 1 GROOVES_HIT_STANDS) runs on
+//      the list's pixels packed densely into a pack target (llvmpipe shades 8 pixels at a time,
+//      and a deferred pixel's tile holds 6 of 16 on average), each pixel along its own ray from
+//      the march's hit, for the cell its slot holds; where it draws, the slot's hit layer then
+//      names the pixel's place in the pack target (kNotPacked where it discarded). Then the
+//      resolve (defer_resolve.frag) draws the list's tiles on the frame, each pixel copying its
+//      packed result, depth-tested as the cast's own fragment would be.
 // A pixel all of whose slots are taken keeps the height field for one more cell (counted).
-
 layout(std430, binding = 2) readonly buffer GrooveField { uint grooveField[]; };  // gcast::gapField
 // Layers: slot 0's cell + 1 (bit 31: class 1), its march's hit (float bits, -1: a miss); slot 1's ...
 layout(binding = 3, r32ui) uniform coherent uimage2DArray deferSlots;
@@ -62,7 +65,12 @@ bool deferPixel(int cell, uint cls, float tHit) {
     uint list = 2u * uint(s) + cls, bit = 1u << list;
     if ((imageAtomicOr(deferTiles, px >> 2, bit) & bit) == 0u) {
       uint k = atomicAdd(deferCmd[4u * list + 1u], 1u);
-      deferTile[list * deferCapacity + k] = (uint(px.y >> 2) << 16) | uint(px.x >> 2);
+      deferItem[list * deferCapacity + k] = (uint(px.y >> 2) << 16) | uint(px.x >> 2);
+    }
+    if (old == 0u) {  // the pixel's first claim of the slot (a second fragment of the cell only moves the hit)
+      uint k = atomicAdd(packCount[list], 1u);
+      deferItem[packedPixelItem(list, k)] = (uint(px.y) << 16) | uint(px.x);
+      if ((k & 15u) == 0u) atomicAdd(packCmd[4u * list + 1u], 1u);  // a new 4x4 block of the pack target
     }
     atomicAdd(deferCount[0], 1u);
     return true;
@@ -75,27 +83,46 @@ bool deferPixel(int cell, uint cls, float tHit) {
 #ifdef PIXEL_RAYS
 uniform int deferSlot;
 uniform uint deferClass;
-uniform vec3 rayBase, rayDx, rayDy;  // the pixel's ray (world): rayBase + rayDx x + rayDy y at gl_FragCoord
+uniform int deferList;
+uniform vec3 rayBase, rayDx, rayDy;  // the pixel's ray (world): rayBase + rayDx x + rayDy y at the pixel's centre
+uniform ivec2 packSize;              // the pack target's size (multiples of 4)
 
 // The first cast of this pixel's ray takes the march's hit from its slot (then kNotDeferred: a
 // shadow ray marches).
 const float kNotDeferred = -2.0;
 float deferredHit = kNotDeferred;
+const uint kNotPacked = 0xffffffffu;  // the slot's hit layer once the cast discarded the pixel
+ivec2 deferredPixel;
 
-// The cell this pixel's slot holds (false: none, or one of the other class), the camera and the
-// pixel's ray in its frame.
+// The frame pixel this fragment of the pack target casts (its list's k-th, k from the fragment's
+// 4x4 block and place in it), the cell its slot holds (false: none, or one of the other class),
+// the camera and the pixel's ray in the cell's frame. Until deferFinish the pixel counts as
+// discarded.
 bool deferredRay(out int cell, out int steps, out vec3 o, out vec3 d) {
-  ivec2 px = ivec2(gl_FragCoord.xy);
+  ivec2 sp = ivec2(gl_FragCoord.xy);
+  uint blocksX = uint(packSize.x) >> 2;
+  uint k = 16u * ((uint(sp.y) >> 2) * blocksX + (uint(sp.x) >> 2)) + 4u * (uint(sp.y) & 3u) + (uint(sp.x) & 3u);
+  if (k >= packCount[deferList]) return false;
+  uint item = deferItem[packedPixelItem(uint(deferList), k)];
+  ivec2 px = ivec2(item & 0xffffu, item >> 16);
+  deferredPixel = px;
   uint id = imageLoad(deferSlots, ivec3(px, 2 * deferSlot)).x;
   if (id == 0u || (id >> 31) != deferClass) return false;
   cell = int(id & 0x7fffffffu) - 1;
   steps = 0;
   deferredHit = uintBitsToFloat(imageLoad(deferSlots, ivec3(px, 2 * deferSlot + 1)).x);
+  imageStore(deferSlots, ivec3(px, 2 * deferSlot + 1), uvec4(kNotPacked));
   Cell c = cells[cell];
   vec3 rel = cellRelativeToCamera(c);
   o = -vec3(dot(rel, c.axisU.xyz), dot(rel, c.axisV.xyz), dot(rel, c.axisW.xyz));
-  vec3 w = rayBase + rayDx * gl_FragCoord.x + rayDy * gl_FragCoord.y;
+  vec3 w = rayBase + rayDx * (float(px.x) + 0.5) + rayDy * (float(px.y) + 0.5);
   d = normalize(vec3(dot(w, c.axisU.xyz), dot(w, c.axisV.xyz), dot(w, c.axisW.xyz)));
   return true;
+}
+
+// The cast drew the pixel: the resolve finds its result at this fragment's place.
+void deferFinish() {
+  ivec2 sp = ivec2(gl_FragCoord.xy);
+  imageStore(deferSlots, ivec3(deferredPixel, 2 * deferSlot + 1), uvec4((uint(sp.y) << 16) | uint(sp.x)));
 }
 #endif

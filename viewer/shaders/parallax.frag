@@ -139,4 +139,7 @@ void main() {
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), inShadow ? 1.0 : 0.0);
   outCell = uint(cell) + 1u;
+#ifdef PIXEL_RAYS
+  deferFinish();  // the resolve copies this fragment's outputs to the pixel (grooves_defer.glsl)
+#endif
 }
