@@ -78,6 +78,45 @@ float gDepth(uint prof, float r, float hw, out float slope) {
   return mix(d0, d1, f - float(k));
 }
 
+// A profile's 9 depths held in registers: the narrow grooves' landings (gFootprintLand) walk them
+// knot by knot for every ray of a footprint, and llvmpipe reads a buffer lane by lane.
+struct GProf {
+  vec4 lo, hi;  // depths 0-3, 4-7
+  float last;   // depth 8 (at the half width)
+};
+
+GProf gLoadProf(uint prof) {
+  GProf P;
+  P.lo = vec4(gWordF(prof), gWordF(prof + 1u), gWordF(prof + 2u), gWordF(prof + 3u));
+  P.hi = vec4(gWordF(prof + 4u), gWordF(prof + 5u), gWordF(prof + 6u), gWordF(prof + 7u));
+  P.last = gWordF(prof + 8u);
+  return P;
+}
+
+// Depth j (0-8).
+float gKnot(GProf P, int j) {
+  vec4 q = j < 4 ? P.lo : P.hi;
+  int i = j & 3;
+  float v = i == 0 ? q.x : i == 1 ? q.y : i == 2 ? q.z : q.w;
+  return j >= 8 ? P.last : v;
+}
+
+// gDepth and gSmoothSlope on a loaded profile.
+float gProfDepth(GProf P, float r, float hw) {
+  if (!(r < hw)) return 0.0;
+  float f = max(r, 0.0) / hw * 8.0;
+  int k = min(int(f), 7);
+  return mix(gKnot(P, k), gKnot(P, k + 1), f - float(k));
+}
+
+float gProfSmoothSlope(GProf P, float r, float hw) {
+  if (!(r < hw)) return 0.0;
+  float f = max(r, 0.0) / hw * 8.0 - 0.5;
+  int k = clamp(int(floor(f)), 0, 6);
+  float d0 = gKnot(P, k), d1 = gKnot(P, k + 1), d2 = gKnot(P, k + 2);
+  return mix(d1 - d0, d2 - d1, clamp(f - float(k), 0.0, 1.0)) * 8.0 / hw;
+}
+
 // The rim at the point (s, x) of the piece's frame (groove_cast.cpp pieceRim): across, the
 // parabola fitted outside the lips (x clamped to them); along, its coefficients linear between
 // the ends and on past them; grad: its gradient (shading).
@@ -324,6 +363,17 @@ void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
 // modePostShade.
 const int kAAUnknown = -2;
 int aaPiece = kAAUnknown;
+// The anti-aliasing's piece (aaPiece) and its profile, read once a pixel.
+int aaLoaded = -1;
+GPiece aaP;
+GProf aaProf;
+void gLoadAA(int cell, int best) {
+  if (aaLoaded == best) return;
+  aaP = gPiece(grooveEntry[cell], uint(best));
+  aaProf = gLoadProf(aaP.prof);
+  aaLoaded = best;
+}
+
 int gAAPiece(Cell c, int cell, vec3 o, vec3 d, float tS) {
   uint blk = grooveEntry[cell];
   vec3 hit = o + d * tS;
@@ -368,7 +418,7 @@ void gSection(GPiece p, vec2 q, out vec3 C, out float ra, out float rx) {
 // the line, then goes down the profile to the first facet it reaches (masking: a ray enters
 // between the walls and meets the far one). Returns its t (-1: it does not meet the plane) and the
 // facet's slope across there (dDdx; 0 outside the half width, where it lands on the rim plane).
-float gFootprintLand(GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, out float xk, out float dDdx) {
+float gFootprintLand(GPiece p, GProf P, vec3 C, float ra, float rx, vec3 o, vec3 dk, out float xk, out float dDdx) {
   vec2 n = vec2(-p.e.y, p.e.x);
   vec3 N = vec3(-(ra * p.e + rx * n), 1.0);
   float den = dot(N, dk);
@@ -377,8 +427,8 @@ float gFootprintLand(GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, out 
   if (abs(den) < 1e-12) return -1.0;
   float t = dot(N, C - o) / den;
   if (t <= 0.0) return -1.0;
-  vec3 P = o + dk * t;
-  xk = dot(P.xy - C.xy, n);
+  vec3 q = o + dk * t;
+  xk = dot(q.xy - C.xy, n);
   if (abs(xk) < p.hw) {
     float dx = dot(dk.xy, n), dz = dk.z - ra * dot(dk.xy, p.e) - rx * dx;  // per unit along the ray, below the rim plane
     float xh = xk, sl;
@@ -386,12 +436,12 @@ float gFootprintLand(GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, out 
       // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between knots.
       float k = dz / dx, step = p.hw / 8.0, dir = sign(dx);
       float x0 = xk;
-      float f0 = gDepth(p.prof, abs(x0), p.hw, sl);
+      float f0 = gProfDepth(P, abs(x0), p.hw);
       xh = dir * p.hw;
       for (int m = 0; m < 17; ++m) {
         // The next knot (or the far edge) in the ray's direction.
         float x1 = dir > 0.0 ? min(floor(x0 / step + 1e-4) * step + step, p.hw) : max(ceil(x0 / step - 1e-4) * step - step, -p.hw);
-        float f1 = (x1 - xk) * k + gDepth(p.prof, abs(x1), p.hw, sl);
+        float f1 = (x1 - xk) * k + gProfDepth(P, abs(x1), p.hw);
         if (f1 <= 0.0) {
           xh = x0 + (x1 - x0) * f0 / max(f0 - f1, 1e-30);
           break;
@@ -402,9 +452,9 @@ float gFootprintLand(GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, out 
       }
       t += (xh - xk) / dx;
     } else {
-      t += gDepth(p.prof, abs(xk), p.hw, sl) / max(-dz, 1e-30);  // straight down the groove
+      t += gProfDepth(P, abs(xk), p.hw) / max(-dz, 1e-30);  // straight down the groove
     }
-    float sm = gSmoothSlope(p.prof, abs(xh), p.hw);
+    float sm = gProfSmoothSlope(P, abs(xh), p.hw);
     dDdx = xh < 0.0 ? -sm : sm;
   }
   return t;
@@ -416,11 +466,12 @@ float gFootprintLand(GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, out 
 float gNarrowLanding(Cell c, int cell, vec3 o, vec3 d, float tS) {
   int best = gAAPiece(c, cell, o, d, tS);
   if (best < 0) return tS;
-  GPiece p = gPiece(grooveEntry[cell], uint(best));
+  gLoadAA(cell, best);
+  GPiece p = aaP;
   vec3 C;
   float ra, rx, xk, dDdx;
   gSection(p, (o + d * tS).xy, C, ra, rx);
-  float t = gFootprintLand(p, C, ra, rx, o, d, xk, dDdx), sl, xl;
+  float t = gFootprintLand(p, aaProf, C, ra, rx, o, d, xk, dDdx), sl, xl;
   // Past a rounded end the straight cross-section has no groove: there the march's hit stands.
   if (t < 0.0 || !(abs(xk) < p.lip) || !(gDist(p, (o + d * t).xy, sl, xl) < p.lip)) return tS;
   castNormal = normalize(vec3(-(p.e * ra + vec2(-p.e.y, p.e.x) * (rx - dDdx)), 1.0));
@@ -598,9 +649,9 @@ bool shadowRay(Cell c, int cell, vec3 p, vec3 l) {
 
 // The colour of one ray of a narrow groove's footprint: where it lands in the cross-section
 // (gFootprintLand), shaded with that facet's normal; outside the profile, the rim's surface.
-vec3 gFootprintSample(Cell c, GPiece p, vec3 C, float ra, float rx, vec3 o, vec3 dk, vec3 albedo, vec3 world) {
+vec3 gFootprintSample(Cell c, GPiece p, GProf P, vec3 C, float ra, float rx, vec3 o, vec3 dk, vec3 albedo, vec3 world) {
   float xk, dDdx;
-  if (gFootprintLand(p, C, ra, rx, o, dk, xk, dDdx) < 0.0) return vec3(-1.0);
+  if (gFootprintLand(p, P, C, ra, rx, o, dk, xk, dDdx) < 0.0) return vec3(-1.0);
   vec2 g = p.e * ra + vec2(-p.e.y, p.e.x) * (rx - dDdx);
   vec3 nf = normalize(vec3(-g, 1.0));
   vec3 nWorld = c.axisU.xyz * nf.x + c.axisV.xyz * nf.y + c.axisW.xyz * nf.z;
@@ -644,7 +695,8 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   int best = aaPiece != kAAUnknown ? aaPiece : gAAPiece(c, cell, o, d, tS);
   vec3 hit = o + d * tS;
   if (best < 0) return color;
-  GPiece p = gPiece(blk, uint(best));
+  gLoadAA(cell, best);
+  GPiece p = aaP;
   vec3 C;
   float ra, rx;
   gSection(p, hit.xy, C, ra, rx);
@@ -668,7 +720,7 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   for (int k = 0; k < n; ++k) {
     float sg = mix(span.x, span.y, (float(k) + 0.5) / float(n));
     float wt = abs(sg) <= lo ? 1.0 : (hi - abs(sg)) / max(hi - lo, 1e-6);
-    vec3 col = gFootprintSample(c, p, C, ra, rx, o, normalize(d + qs * sg), albedo, world);
+    vec3 col = gFootprintSample(c, p, aaProf, C, ra, rx, o, normalize(d + qs * sg), albedo, world);
     if (col.x < 0.0) continue;
     sum += wt * col;
     wsum += wt;
