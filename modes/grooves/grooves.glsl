@@ -151,6 +151,14 @@ float gFloor(Cell c, GPiece p, vec2 q) {
   return rim - gDepth(p.prof, r, p.hw, sl);
 }
 
+// The same on the piece's profile loaded (the loops over one piece's floor).
+float gFloorP(GPiece p, GProf P, vec2 q) {
+  float s, x;
+  vec2 gr;
+  float r = gDist(p, q, s, x);
+  return gRim(p, s, x, gr) - gProfDepth(P, r, p.hw);
+}
+
 // The floor's shading normal (frame) at q, smooth across the profile's facets; the rim's past the
 // half width (the height field's normals there are those of the data's blurred crack).
 vec3 gNormal(GPiece p, vec2 q) {
@@ -210,21 +218,22 @@ float gAirExit(Cell c, GPiece p, vec3 o, vec3 d, float t, float t1) {
   vec3 q0 = o + d * t;
   float te = t + gCapsuleExit(p, q0.xy, d.xy);
   float tEnd = min(te, t1);
-  float ta = t, fa = q0.z - gFloor(c, p, q0.xy);
+  GProf P = gLoadProf(p.prof);
+  float ta = t, fa = q0.z - gFloorP(p, P, q0.xy);
   for (int i = 1; i <= 16; ++i) {
     float tb = t + (tEnd - t) * float(i) / 16.0;
     vec3 qb = o + d * tb;
-    float fb = qb.z - gFloor(c, p, qb.xy);
+    float fb = qb.z - gFloorP(p, P, qb.xy);
     if (fb <= 0.0) {
       for (int k = 0; k < 14; ++k) {
         float tm = 0.5 * (ta + tb);
         vec3 qm = o + d * tm;
-        float fm = qm.z - gFloor(c, p, qm.xy);
+        float fm = qm.z - gFloorP(p, P, qm.xy);
         if (fm > 0.0) { ta = tm; fa = fm; } else { tb = tm; fb = fm; }
       }
       float ts = fa > fb ? ta + (tb - ta) * fa / (fa - fb) : tb;
       vec3 qs = o + d * ts;
-      return qs.z - gFloor(c, p, qs.xy) <= 0.0 ? ts : tb;
+      return qs.z - gFloorP(p, P, qs.xy) <= 0.0 ? ts : tb;
     }
     ta = tb;
     fa = fb;
