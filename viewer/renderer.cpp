@@ -136,6 +136,7 @@ struct Renderer::Gl {
   GLuint gdmEntryBuf = 0, gdmWordBuf = 0;            // gdm: per-cell block offsets, the voxel grids
   GLuint grooveEntryBuf = 0, grooveWordBuf = 0;      // grooves: per-cell block offsets, profiles and blocks
   GLuint grooveFieldBuf = 0;                         // grooves: the cells' gap fields (gcast::gapField)
+  GLuint grooveTex[3] = {};  // grooves: the field, the block offsets and the words as buffer textures (units 8-10)
   // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): slots a pixel,
   // flags per 4x4 tile, the lists of tiles and of pixels and their indirect draws; the pack
   // target the cast draws a list's pixels into (colour, linear depth, normal, cell, as fbo's).
@@ -197,6 +198,7 @@ struct Renderer::Gl {
     GLuint modeBufs[] = {mipBuf,     mipOffBuf,   counterBuf,     vdmEntryBuf,   vdmWordBuf,
                          gdmEntryBuf, gdmWordBuf, grooveEntryBuf, grooveWordBuf, grooveFieldBuf};
     glDeleteBuffers(10, modeBufs);
+    glDeleteTextures(3, grooveTex);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -541,15 +543,31 @@ Status Renderer::ensureShadowPrograms(RenderMode m) {
   return Status::ok();
 }
 
-// grooves: the section's blocks, the cells' gap fields and the second pass's programs.
-Status Renderer::initGrooves(const PackReader& pack, const gcast::SectionView& v) {
+// grooves: the section's blocks, the cells' gap fields (buffer textures: grooves.glsl) and the
+// second pass's programs. Not usable (the mode's problem says why) where one of them is longer
+// than a buffer texture may be on this GPU.
+Status Renderer::initGrooves(const PackReader& pack, const gcast::SectionView& v, bool& usable) {
   Gl& g = *gl_;
+  const std::vector<uint32_t> field = gcast::gapField(pack, gcast::modelFromSection(pack, v));
+  GLint maxTexels = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &maxTexels);
+  const uint64_t longest = std::max({uint64_t(v.header.cellCount), uint64_t(v.header.wordCount), uint64_t(field.size())});
+  usable = longest <= uint64_t(std::max(maxTexels, 0));
+  if (!usable) {
+    modeProblems_[int(RenderMode::kGrooves)] = "the grooves section and gap field need " + std::to_string(longest) +
+                                               " words in one buffer texture, more than this GPU's " + std::to_string(maxTexels);
+    return Status::ok();
+  }
   grooveBytes_ = uploadBlocks(v.header.cellCount, v.entries, v.header.wordCount, v.words, g.grooveEntryBuf, g.grooveWordBuf);
   grooveKind_.assign(v.header.cellCount, 0);
   for (uint32_t i = 0; i < v.header.cellCount; ++i) grooveKind_[i] = v.entries[i] != gcast::kNoEntry ? 1 : 0;
-  const std::vector<uint32_t> field = gcast::gapField(pack, gcast::modelFromSection(pack, v));
   glCreateBuffers(1, &g.grooveFieldBuf);
   glNamedBufferStorage(g.grooveFieldBuf, GLsizeiptr(std::max<size_t>(field.size(), 1) * 4), field.data(), 0);
+  const GLuint bufs[3] = {g.grooveFieldBuf, g.grooveEntryBuf, g.grooveWordBuf};
+  for (int i = 0; i < 3; ++i) {
+    glCreateTextures(GL_TEXTURE_BUFFER, 1, &g.grooveTex[i]);
+    glTextureBuffer(g.grooveTex[i], GL_R32UI, bufs[i]);
+  }
   grooveBytes_ += field.size() * 4;
   gpuBytes_ += grooveBytes_;
   const char* unit = modeInfo(RenderMode::kGrooves).castUnit;
@@ -604,7 +622,9 @@ Status Renderer::initModes(const PackReader& pack) {
       auto v = gcast::readSection(pack);
       if (!v.isOk() && unusable(v.status())) continue;
       if (!v->present) continue;  // drawn as parallax: a groove neither detected nor given is never drawn
-      SA_RETURN_IF_ERROR(initGrooves(pack, *v));
+      bool usable = false;
+      SA_RETURN_IF_ERROR(initGrooves(pack, *v, usable));
+      if (!usable) continue;  // drawn as parallax, with the reason
     }
     if (mi.mode == RenderMode::kVdm) {
       auto v = vdm::readSection(pack);
@@ -1078,7 +1098,6 @@ void Renderer::beginGrooves(const RenderSettings& s, unsigned frontProgram, unsi
   GLuint head[kDeferHead] = {};  // each list: a point a tile or block, none yet; nothing deferred
   for (int l = 0; l < 2 * kDeferLists; ++l) head[4 * l] = 1;
   glNamedBufferSubData(g.deferBuf, 0, sizeof(head), head);
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, g.grooveFieldBuf);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.deferBuf);
   glBindImageTexture(3, g.deferSlotsTex, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
   glBindImageTexture(4, g.deferTilesTex, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
@@ -1244,8 +1263,7 @@ void Renderer::bindModeBuffers(RenderMode drawn) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.gdmEntryBuf);  // slices: forced cells slice gdm's voxels
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
   } else if (drawn == RenderMode::kGrooves) {
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, g.grooveEntryBuf);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.grooveWordBuf);
+    for (int i = 0; i < 3; ++i) glBindTextureUnit(GLuint(8 + i), g.grooveTex[i]);
   }
 }
 

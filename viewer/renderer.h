@@ -220,7 +220,7 @@ class Renderer {
   Status createDeferTargets(int width, int height);
   void readDeferred(FrameStats& st);
   Status initModes(const PackReader& pack);
-  Status initGrooves(const PackReader& pack, const gcast::SectionView& v);
+  Status initGrooves(const PackReader& pack, const gcast::SectionView& v, bool& usable);
   void readCounters(WorkCounters& w);
   void drawPoints(const Camera& cam, const FrameUniforms& f, const RenderSettings& s, FrameStats& st);
   void drawEdl(const RenderSettings& s);

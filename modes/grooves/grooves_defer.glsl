@@ -16,7 +16,8 @@
 //      resolve (defer_resolve.frag) draws the list's tiles on the frame, each pixel copying its
 //      packed result, depth-tested as the cast's own fragment would be.
 // A pixel all of whose slots are taken keeps the height field for one more cell (counted).
-layout(std430, binding = 2) readonly buffer GrooveField { uint grooveField[]; };  // gcast::gapField
+layout(binding = 8) uniform usamplerBuffer grooveFields;  // gcast::gapField (a buffer texture: see grooves.glsl)
+#define grooveField(i) texelFetch(grooveFields, int(i)).r
 // Layers: slot 0's cell + 1 (bit 31: class 1), its march's hit (float bits, -1: a miss); slot 1's ...
 layout(binding = 3, r32ui) uniform coherent uimage2DArray deferSlots;
 layout(binding = 4, r32ui) uniform coherent uimage2D deferTiles;       // per 4x4 pixels: bit s, slot s holds one there
@@ -29,22 +30,22 @@ const uint kGapWords = 3u;      // gcast::kGapFieldWords
 uint grooveFieldTexel(Cell c, int cell, vec2 q) {
   ivec2 n = max(ivec2(c.boxW.zw), ivec2(1));
   ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * vec2(n))), ivec2(0), n - 1);
-  return grooveField[cell] + 1u + kGapWords * uint(i.y * n.x + i.x);
+  return grooveField(cell) + 1u + kGapWords * uint(i.y * n.x + i.x);
 }
 
 // The most any of the cell's pieces measures across (gcast::widestAcross).
-float grooveWidest(int cell) { return uintBitsToFloat(grooveField[grooveField[cell]]); }
+float grooveWidest(int cell) { return uintBitsToFloat(grooveField(grooveField(cell))); }
 
 // The two pieces nearest the centre of the texel under q by (distance - half width) (~0u: none).
 uvec2 grooveNear(Cell c, int cell, vec2 q) {
   uint w = grooveFieldTexel(c, cell, q);
-  return uvec2(grooveField[w + 1u], grooveField[w + 2u]);
+  return uvec2(grooveField(w + 1u), grooveField(w + 2u));
 }
 
 // Lower bounds at q (frame) of min over the cell's pieces of (distance to the segment - lip), x,
 // and of (distance - half width), y (gcast::gapField).
 vec2 grooveGap(Cell c, int cell, vec2 q) {
-  uint w = grooveField[grooveFieldTexel(c, cell, q)];
+  uint w = grooveField(grooveFieldTexel(c, cell, q));
   vec2 size = c.boxUV.yw - c.boxUV.xz;
   vec2 texel = size / vec2(max(ivec2(c.boxW.zw), ivec2(1)));
   float quantum = kGapTexels * min(texel.x, texel.y) / 65535.0;
