@@ -137,6 +137,7 @@ struct Renderer::Gl {
   GLuint grooveEntryBuf = 0, grooveWordBuf = 0;      // grooves: per-cell block offsets, profiles and blocks
   GLuint grooveFieldBuf = 0;                         // grooves: the cells' gap fields (gcast::gapField)
   GLuint grooveTex[3] = {};  // grooves: the field, the block offsets and the words as buffer textures (units 8-10)
+  GLuint cellTex = 0;        // grooves' second pass: the cell table as a buffer texture (unit 11)
   // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): slots a pixel,
   // flags per 4x4 tile, the lists of tiles and of pixels and their indirect draws; the pack
   // target the cast draws a list's pixels into (colour, linear depth, normal, cell, as fbo's).
@@ -199,6 +200,7 @@ struct Renderer::Gl {
                          gdmEntryBuf, gdmWordBuf, grooveEntryBuf, grooveWordBuf, grooveFieldBuf};
     glDeleteBuffers(10, modeBufs);
     glDeleteTextures(3, grooveTex);
+    glDeleteTextures(1, &cellTex);
     GLuint vaos[] = {vao, pointVao};
     glDeleteVertexArrays(2, vaos);
     GLuint bufs[] = {cellBuf, itemBuf, pointBuf};
@@ -289,6 +291,10 @@ Status Renderer::init(const PackReader& pack, bool streamPages, uint64_t gpuBudg
   glNamedBufferStorage(g.cellBuf, GLsizeiptr(std::max<size_t>(1, cells.size()) * sizeof(GpuCell)),
                        cells.empty() ? nullptr : cells.data(), gpuBudget ? GL_DYNAMIC_STORAGE_BIT : 0);
   gpuBytes_ = cells.size() * sizeof(GpuCell);
+  if (g.grooveEntryBuf) {  // grooves' second pass reads a deferred pixel's cell from it (grooves_defer.glsl)
+    glCreateTextures(GL_TEXTURE_BUFFER, 1, &g.cellTex);
+    glTextureBuffer(g.cellTex, GL_RGBA32F, g.cellBuf);
+  }
   glCreateBuffers(1, &g.itemBuf);
   glGetIntegerv(GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT, &g.ssboAlign);
   g.ssboAlign = std::max(g.ssboAlign, 1);
@@ -551,10 +557,11 @@ Status Renderer::initGrooves(const PackReader& pack, const gcast::SectionView& v
   const std::vector<uint32_t> field = gcast::gapField(pack, gcast::modelFromSection(pack, v));
   GLint maxTexels = 0;
   glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &maxTexels);
-  const uint64_t longest = std::max({uint64_t(v.header.cellCount), uint64_t(v.header.wordCount), uint64_t(field.size())});
+  const uint64_t longest = std::max({uint64_t(v.header.cellCount), uint64_t(v.header.wordCount), uint64_t(field.size()),
+                                     uint64_t(pack.meta().cellCount) * (sizeof(GpuCell) / 16)});
   usable = longest <= uint64_t(std::max(maxTexels, 0));
   if (!usable) {
-    modeProblems_[int(RenderMode::kGrooves)] = "the grooves section and gap field need " + std::to_string(longest) +
+    modeProblems_[int(RenderMode::kGrooves)] = "the grooves section, gap field and cell table need " + std::to_string(longest) +
                                                " words in one buffer texture, more than this GPU's " + std::to_string(maxTexels);
     return Status::ok();
   }
@@ -1264,6 +1271,7 @@ void Renderer::bindModeBuffers(RenderMode drawn) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, g.gdmWordBuf);
   } else if (drawn == RenderMode::kGrooves) {
     for (int i = 0; i < 3; ++i) glBindTextureUnit(GLuint(8 + i), g.grooveTex[i]);
+    glBindTextureUnit(11, g.cellTex);
   }
 }
 

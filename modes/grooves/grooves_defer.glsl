@@ -88,6 +88,22 @@ uniform int deferList;
 uniform vec3 rayBase, rayDx, rayDy;  // the pixel's ray (world): rayBase + rayDx x + rayDy y at the pixel's centre
 uniform ivec2 packSize;              // the pack target's size (multiples of 4)
 
+// The cell table as a buffer texture (8 texels a Cell): a deferred pixel's cell comes from its
+// slot, and llvmpipe reads a storage buffer at a per-pixel index lane by lane.
+layout(binding = 11) uniform samplerBuffer cellTexels;
+Cell cellAt(int i) {
+  Cell c;
+  c.originHi = texelFetch(cellTexels, 8 * i);
+  c.originLo = texelFetch(cellTexels, 8 * i + 1);
+  c.axisU = texelFetch(cellTexels, 8 * i + 2);
+  c.axisV = texelFetch(cellTexels, 8 * i + 3);
+  c.axisW = texelFetch(cellTexels, 8 * i + 4);
+  c.boxUV = texelFetch(cellTexels, 8 * i + 5);
+  c.boxW = texelFetch(cellTexels, 8 * i + 6);
+  c.tile = floatBitsToInt(texelFetch(cellTexels, 8 * i + 7));
+  return c;
+}
+
 // The first cast of this pixel's ray takes the march's hit from its slot (then kNotDeferred: a
 // shadow ray marches).
 const float kNotDeferred = -2.0;
@@ -113,7 +129,7 @@ bool deferredRay(out int cell, out int steps, out vec3 o, out vec3 d) {
   steps = 0;
   deferredHit = uintBitsToFloat(imageLoad(deferSlots, ivec3(px, 2 * deferSlot + 1)).x);
   imageStore(deferSlots, ivec3(px, 2 * deferSlot + 1), uvec4(kNotPacked));
-  Cell c = cells[cell];
+  Cell c = cellAt(cell);
   vec3 rel = cellRelativeToCamera(c);
   o = -vec3(dot(rel, c.axisU.xyz), dot(rel, c.axisV.xyz), dot(rel, c.axisW.xyz));
   vec3 w = rayBase + rayDx * (float(px.x) + 0.5) + rayDy * (float(px.y) + 0.5);

@@ -82,7 +82,11 @@ void main() {
   vec3 o = vCamFrame;
   vec3 d = normalize(vFrame - vCamFrame);
 #endif
+#ifdef PIXEL_RAYS
+  Cell c = cellAt(cell);  // the deferred pixel's cell (grooves_defer.glsl)
+#else
   Cell c = cells[cell];
+#endif
   // Slab clip against the box [uMin,uMax] x [vMin,vMax] x [wMin,wMax].
   vec3 bmin = vec3(c.boxUV.x, c.boxUV.z, c.boxW.x);
   vec3 bmax = vec3(c.boxUV.y, c.boxUV.w, c.boxW.y);
