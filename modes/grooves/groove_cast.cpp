@@ -782,7 +782,9 @@ static void cellGapField(const CellRecord& c, const CellPieces& cp, uint32_t* ou
         }
       }
   }
-  const double margin = half + 1e-3 * std::min(tu, tv);
+  // At the texel's centre: the shader takes off the distance from it (both are 1-Lipschitz). The
+  // margin covers the shader's float rounding of the centre and the quantum.
+  const double margin = 1e-3 * std::min(tu, tv);
   auto code = [&](double gap) {
     const double v = (gap - margin) / q;
     return v <= 0 ? 0u : v >= 65535 ? 65535u : uint32_t(std::floor(v));

@@ -126,8 +126,11 @@ float blockRise(const SectionView& v, uint32_t cell);
 Model modelFromSection(const PackReader& pack, const SectionView& v);
 
 // The renderer's gap field (two passes, viewer/renderer.cpp): per texel of each cell with pieces,
-// lower bounds over the texel's square of min over its pieces of (distance to the piece's segment
-// - its lip) and of (distance - its half width), in frame units: where they exceed the reach of
+// lower bounds at the texel's centre of min over its pieces of (distance to the piece's segment
+// - its lip) and of (distance - its half width), in frame units (both change by at most the
+// distance moved: the shader takes off a point's distance from the centre to bound them there;
+// before 2026-12-06 the field held the bounds over the texel's square, up to 0.7 texels lower
+// on average): where they exceed the reach of
 // every rule that can change a pixel (the capsule and the stretch a floor above h is searched
 // over; the anti-aliasing's footprint), the carved cast's answer is the height field's. Clamped to
 // kGapFieldTexels texels (a larger reach reads the cap and takes the carved cast). With them, the

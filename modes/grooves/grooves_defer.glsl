@@ -26,10 +26,12 @@ layout(binding = 4, r32ui) uniform coherent uimage2D deferTiles;       // per 4x
 const float kGapTexels = 32.0;  // gcast::kGapFieldTexels
 const uint kGapWords = 3u;      // gcast::kGapFieldWords
 
-// The first word of the field's texel under q (frame; clamped to the tile).
-uint grooveFieldTexel(Cell c, int cell, vec2 q) {
+// The first word of the field's texel under q (frame; clamped to the tile) and its centre.
+uint grooveFieldTexel(Cell c, int cell, vec2 q, out vec2 centre) {
   ivec2 n = max(ivec2(c.boxW.zw), ivec2(1));
-  ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / (c.boxUV.yw - c.boxUV.xz) * vec2(n))), ivec2(0), n - 1);
+  vec2 size = c.boxUV.yw - c.boxUV.xz;
+  ivec2 i = clamp(ivec2(floor((q - c.boxUV.xz) / size * vec2(n))), ivec2(0), n - 1);
+  centre = c.boxUV.xz + (vec2(i) + 0.5) * size / vec2(n);
   return grooveField(cell) + 1u + kGapWords * uint(i.y * n.x + i.x);
 }
 
@@ -38,20 +40,20 @@ float grooveWidest(int cell) { return uintBitsToFloat(grooveField(grooveField(ce
 
 // The two pieces nearest the centre of the texel under q by (distance - half width) (~0u: none).
 uvec2 grooveNear(Cell c, int cell, vec2 q) {
-  uint w = grooveFieldTexel(c, cell, q);
+  vec2 centre;
+  uint w = grooveFieldTexel(c, cell, q, centre);
   return uvec2(grooveField(w + 1u), grooveField(w + 2u));
 }
 
 // Lower bounds at q (frame) of min over the cell's pieces of (distance to the segment - lip), x,
-// and of (distance - half width), y (gcast::gapField).
+// and of (distance - half width), y: the field holds them at the texel's centre (gcast::gapField),
+// and both change by at most the distance moved, so q's distance from the centre comes off.
 vec2 grooveGap(Cell c, int cell, vec2 q) {
-  uint w = grooveField(grooveFieldTexel(c, cell, q));
-  vec2 size = c.boxUV.yw - c.boxUV.xz;
-  vec2 texel = size / vec2(max(ivec2(c.boxW.zw), ivec2(1)));
+  vec2 centre;
+  uint w = grooveField(grooveFieldTexel(c, cell, q, centre));
+  vec2 texel = (c.boxUV.yw - c.boxUV.xz) / vec2(max(ivec2(c.boxW.zw), ivec2(1)));
   float quantum = kGapTexels * min(texel.x, texel.y) / 65535.0;
-  // Past the box, the distance to it comes off (the bounds hold over the edge texel's square).
-  float outside = length(max(max(c.boxUV.xz - q, q - c.boxUV.yw), vec2(0.0)));
-  return vec2(float(w & 0xffffu), float(w >> 16u)) * quantum - outside;
+  return vec2(float(w & 0xffffu), float(w >> 16u)) * quantum - length(q - centre);
 }
 
 #ifdef GROOVES_DEFER
