@@ -142,7 +142,7 @@ struct Renderer::Gl {
   // flags per 4x4 tile, the lists of tiles and of pixels and their indirect draws; the pack
   // target the cast draws a list's pixels into (colour, linear depth, normal, cell, as fbo's).
   GLuint deferSlotsTex = 0, deferTilesTex = 0, deferBuf = 0;
-  uint32_t deferCapacity = 0, packCapacity = 0;  // tiles, pixels a list holds
+  uint32_t deferCapacity = 0, packCapacity = 0;  // tiles a list holds, pixels a slot's two lists hold
   GLuint packFbo = 0, packTex[4] = {};
   int packW = 0, packH = 0;
   GLsizeiptr itemCapacity = 0;
@@ -833,7 +833,8 @@ Status Renderer::createDeferTargets(int width, int height) {
   g.packH = 4 * th;
   g.packCapacity = 16 * g.deferCapacity;
   glCreateBuffers(1, &g.deferBuf);
-  glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + kDeferLists * (uint64_t(g.deferCapacity) + g.packCapacity)) * 4), nullptr,
+  glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + kDeferLists * uint64_t(g.deferCapacity) + kDeferSlots * uint64_t(g.packCapacity)) * 4),
+                       nullptr,
                        GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
   const GLenum formats[4] = {GL_RGBA8, GL_R32F, GL_RGBA16F, GL_R32UI};  // colorTex, linearTex, normalRb, cellRb
   glCreateFramebuffers(1, &g.packFbo);
