@@ -73,14 +73,11 @@ float gDist(GPiece p, vec2 q, out float s, out float x) {
   return length(r - p.e * clamp(s, 0.0, p.len));
 }
 
-float gDepth(uint prof, float r, float hw, out float slope) {
-  slope = 0.0;
+float gDepth(uint prof, float r, float hw) {
   if (!(r < hw)) return 0.0;
   float f = max(r, 0.0) / hw * 8.0;
   int k = min(int(f), 7);
-  float d0 = gWordF(prof + uint(k)), d1 = gWordF(prof + uint(k) + 1u);
-  slope = (d1 - d0) * 8.0 / hw;
-  return mix(d0, d1, f - float(k));
+  return mix(gWordF(prof + uint(k)), gWordF(prof + uint(k) + 1u), f - float(k));
 }
 
 // A profile's 9 depths held in registers: the narrow grooves' landings (gFootprintLand) walk them
@@ -149,11 +146,11 @@ float gSmoothSlope(uint prof, float r, float hw) {
 // rim - D(r); past the half width (D = 0) out to the lip the rim, which replaces the data's
 // blurred crack there and meets the height field at the capsule's edge to first order.
 float gFloor(Cell c, GPiece p, vec2 q) {
-  float s, x, sl;
+  float s, x;
   vec2 gr;
   float r = gDist(p, q, s, x);
   float rim = gRim(p, s, x, gr);
-  return rim - gDepth(p.prof, r, p.hw, sl);
+  return rim - gDepth(p.prof, r, p.hw);
 }
 
 // The same on the piece's profile loaded (the loops over one piece's floor).
@@ -445,7 +442,7 @@ float gFootprintLand(GPiece p, GProf P, vec3 C, float ra, float rx, vec3 o, vec3
   xk = dot(q.xy - C.xy, n);
   if (abs(xk) < p.hw) {
     float dx = dot(dk.xy, n), dz = dk.z - ra * dot(dk.xy, p.e) - rx * dx;  // per unit along the ray, below the rim plane
-    float xh = xk, sl;
+    float xh = xk;
     if (abs(dx) > 1e-7 * abs(dz)) {
       // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between knots.
       float k = dz / dx, step = p.hw / 8.0, dir = sign(dx);

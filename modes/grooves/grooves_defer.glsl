@@ -117,7 +117,7 @@ ivec2 deferredPixel;
 // 4x4 block and place in it), the cell its slot holds (false: none, or one of the other class),
 // the camera and the pixel's ray in the cell's frame. Until deferFinish the pixel counts as
 // discarded.
-bool deferredRay(out int cell, out int steps, out vec3 o, out vec3 d) {
+bool deferredRay(out int cell, out Cell c, out int steps, out vec3 o, out vec3 d) {
   ivec2 sp = ivec2(gl_FragCoord.xy);
   uint blocksX = uint(packSize.x) >> 2;
   uint k = 16u * ((uint(sp.y) >> 2) * blocksX + (uint(sp.x) >> 2)) + 4u * (uint(sp.y) & 3u) + (uint(sp.x) & 3u);
@@ -131,7 +131,7 @@ bool deferredRay(out int cell, out int steps, out vec3 o, out vec3 d) {
   steps = 0;
   deferredHit = uintBitsToFloat(imageLoad(deferSlots, ivec3(px, 2 * deferSlot + 1)).x);
   imageStore(deferSlots, ivec3(px, 2 * deferSlot + 1), uvec4(kNotPacked));
-  Cell c = cellAt(cell);
+  c = cellAt(cell);
   vec3 rel = cellRelativeToCamera(c);
   o = -vec3(dot(rel, c.axisU.xyz), dot(rel, c.axisV.xyz), dot(rel, c.axisW.xyz));
   vec3 w = rayBase + rayDx * (float(px.x) + 0.5) + rayDy * (float(px.y) + 0.5);

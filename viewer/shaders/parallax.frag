@@ -75,16 +75,13 @@ void main() {
 #ifdef PIXEL_RAYS
   // A deferred pixel (grooves_defer.glsl): the cell its slot holds, along the pixel's ray.
   int cell, steps;
+  Cell c;
   vec3 o, d;
-  if (!deferredRay(cell, steps, o, d)) discard;
+  if (!deferredRay(cell, c, steps, o, d)) discard;
 #else
   int cell = vCell, steps = vSteps;
   vec3 o = vCamFrame;
   vec3 d = normalize(vFrame - vCamFrame);
-#endif
-#ifdef PIXEL_RAYS
-  Cell c = cellAt(cell);  // the deferred pixel's cell (grooves_defer.glsl)
-#else
   Cell c = cells[cell];
 #endif
   // Slab clip against the box [uMin,uMax] x [vMin,vMax] x [wMin,wMax].
