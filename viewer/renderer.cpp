@@ -1075,7 +1075,7 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   drawList(ownLists_[2], front(gm), GL_BACK, GL_TRIANGLES, 36);  // gdm's forced cells
   drawList(ownLists_[3], inside(gm), GL_FRONT, GL_TRIANGLES, 36);
   glDisable(GL_CULL_FACE);
-  if (grooves) drawDeferredGrooves(f, s);
+  if (grooves) drawDeferredGrooves(f, s, bufs[2] != GL_NONE);
   if (!s.showBoxes) return;
   // The decomposition view: every drawn box's edges, depth-tested against the surface.
   off = 0;
@@ -1118,7 +1118,7 @@ void Renderer::beginGrooves(const RenderSettings& s, unsigned frontProgram, unsi
 
 // grooves' second pass: per list, its class's cast over the list's pixels packed into the pack
 // target, then the resolve over the list's tiles of the frame (grooves_defer.glsl).
-void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s) {
+void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s, bool wantNormals) {
   Gl& g = *gl_;
   glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT);
   glBindBuffer(GL_DRAW_INDIRECT_BUFFER, g.deferBuf);
@@ -1134,6 +1134,7 @@ void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings&
     glUniform1ui(glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
     glUniform1ui(glGetUniformLocation(p, "packCapacity"), g.packCapacity);
     glUniform1ui(glGetUniformLocation(p, "deferClass"), GLuint(cls));
+    glUniform1i(glGetUniformLocation(p, "wantNormals"), wantNormals ? 1 : 0);  // else a narrow groove's footprint skips the hit's
     glUniform2i(glGetUniformLocation(p, "packSize"), g.packW, g.packH);
     glUniform3fv(glGetUniformLocation(p, "rayBase"), 1, f.rayBase.data());
     glUniform3fv(glGetUniformLocation(p, "rayDx"), 1, f.rayDx.data());

@@ -135,7 +135,7 @@ Model modelFromSection(const PackReader& pack, const SectionView& v);
 // over; the anti-aliasing's footprint), the carved cast's answer is the height field's. Clamped to
 // kGapFieldTexels texels (a larger reach reads the cap and takes the carved cast). With them, the
 // two pieces of least (distance - half width) at the texel's centre: the anti-aliasing's
-// candidates (modePostShade), read instead of searching the bins around every pixel. Words: per
+// candidates (modeFootprintColor), read instead of searching the bins around every pixel. Words: per
 // pack cell the first word of its field (kNoEntry: none), then the fields: widestAcross(cell) as
 // an f32, then row-major (u fastest) kGapFieldWords words a texel: the lip's bound in the low 16
 // bits and the half width's in the high, each in units of gapQuantum(cell), rounded down; the

@@ -47,7 +47,7 @@ struct GPiece {
 float gWordF(uint w) { return uintBitsToFloat(grooveWord(w)); }
 
 // How far from a hit at tS a groove's half width may lie and still be in the pixel's footprint
-// (modePostShade): its samples reach 0.71 pixel from the centre, on the surface that over the
+// (modeFootprintColor): its samples reach 0.71 pixel from the centre, on the surface that over the
 // incidence's cosine (taken at least 0.1).
 float gFootprintReach(float tS, vec3 d) { return 0.75 * tS * pixelAngle / max(abs(d.z), 0.1); }
 
@@ -324,7 +324,7 @@ uniform bool deferAll;  // self-shadowing: every hit takes the carved cast (its 
 // The first pass: the height field's march; a pixel where the carved cast can differ is deferred
 // to the second (deferPixel) and not drawn here. It can differ only where the hit is inside a capsule, or within
 // twice the stretch a floor above h is searched over of one (castCell's window, from either end);
-// within the anti-aliasing's reach of a groove's half width (modePostShade); or, where floors rise
+// within the anti-aliasing's reach of a groove's half width (modeFootprintColor); or, where floors rise
 // above h and the march misses, the same near the extended box's exit.
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
   bool hit = parallaxTrace(c, boxSteps, o, d, tEnter, tExit, tHit, work);
@@ -358,7 +358,7 @@ bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, floa
 
 bool shadowRay(Cell c, int cell, vec3 p, vec3 l) { return parallaxShadowRay(c, p, l); }
 #else
-#define MODE_POST_SHADE 1
+#define MODE_FOOTPRINT 1
 #define MODE_EXTENDS_BOX 1
 
 // The grooves cut below the height field's box: the cast runs down to the lowest floor.
@@ -371,7 +371,7 @@ void modeExtendBox(int cell, inout vec3 bmin, inout vec3 bmax) {
 // texel (the gap field's candidates: a search of the bins around every pixel cost llvmpipe more
 // than the footprint's rays), the one of least (distance - half width) that is under two pixels
 // wide as seen along d and whose half width the pixel's footprint reaches. Kept in aaPiece for
-// modePostShade.
+// modeFootprintColor.
 const int kAAUnknown = -2;
 int aaPiece = kAAUnknown;
 // The anti-aliasing's piece (aaPiece) and its profile, read once a pixel.
@@ -405,9 +405,14 @@ int gAAPiece(Cell c, int cell, vec3 o, vec3 d, float tS) {
     if (wpx < 2.0 && gap < reach && gap < bestGap) {
       best = int(near[k]);
       bestGap = gap;
+      aaP = p;
     }
   }
   aaPiece = best;
+  if (best >= 0) {  // gLoadAA's piece is the one just read
+    aaProf = gLoadProf(aaP.prof);
+    aaLoaded = best;
+  }
   return best;
 }
 
@@ -444,22 +449,26 @@ float gFootprintLand(GPiece p, GProf P, vec3 C, float ra, float rx, vec3 o, vec3
     float dx = dot(dk.xy, n), dz = dk.z - ra * dot(dk.xy, p.e) - rx * dx;  // per unit along the ray, below the rim plane
     float xh = xk;
     if (abs(dx) > 1e-7 * abs(dz)) {
-      // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between knots.
-      float k = dz / dx, step = p.hw / 8.0, dir = sign(dx);
-      float x0 = xk;
-      float f0 = gProfDepth(P, abs(x0), p.hw);
+      // f(x) = height of the ray above the floor at x: (x - xk) dz / dx + D(|x|), linear between
+      // knots. The first knot ahead of xk (more than 1e-4 of a step) in the ray's direction where
+      // f <= 0, from a scan of all 17 with constant indices (a walk indexing the profile per step
+      // cost llvmpipe most of the footprint's time); then the crossing on the stretch before it.
+      float k = dz / dx, step = p.hw / 8.0, dir = sign(dx), ahead = xk + dir * 1e-4 * step;
+      int hitM = -1;
+      for (int m = 0; m <= 16; ++m) {
+        float xm = float(m - 8) * step;
+        bool cross = dir * (xm - ahead) > 0.0 && (xm - xk) * k + gKnot(P, abs(m - 8)) <= 0.0;
+        if (cross && (dir < 0.0 || hitM < 0)) hitM = m;
+      }
       xh = dir * p.hw;
-      for (int m = 0; m < 17; ++m) {
-        // The next knot (or the far edge) in the ray's direction.
-        float x1 = dir > 0.0 ? min(floor(x0 / step + 1e-4) * step + step, p.hw) : max(ceil(x0 / step - 1e-4) * step - step, -p.hw);
-        float f1 = (x1 - xk) * k + gProfDepth(P, abs(x1), p.hw);
-        if (f1 <= 0.0) {
-          xh = x0 + (x1 - x0) * f0 / max(f0 - f1, 1e-30);
-          break;
-        }
-        if (abs(x1) >= p.hw) break;
-        x0 = x1;
-        f0 = f1;
+      if (hitM >= 0) {
+        float x1 = float(hitM - 8) * step, f1 = (x1 - xk) * k + gKnot(P, abs(hitM - 8));
+        int prevM = clamp(hitM - int(dir), 0, 16);
+        float xp = float(prevM - 8) * step;
+        bool fromKnot = dir * (xp - ahead) > 0.0;
+        float x0 = fromKnot ? xp : xk;
+        float f0 = fromKnot ? (xp - xk) * k + gKnot(P, abs(prevM - 8)) : gProfDepth(P, abs(xk), p.hw);
+        xh = x0 + (x1 - x0) * f0 / max(f0 - f1, 1e-30);
       }
       t += (xh - xk) / dx;
     } else {
@@ -514,7 +523,7 @@ float gFloorCrossing(Cell c, GPiece p, vec3 o, vec3 d, float t0, float t1) {
 bool castCell(Cell c, int cell, int boxSteps, vec3 o, vec3 d, float tEnter, float tExit, out float tHit, out uint work) {
 #ifdef GROOVES_HIT_STANDS
   // The second pass's class 1: the march's hit is the surface, or where a narrow groove is under
-  // the pixel, the centre ray's landing in its cross-section (modePostShade draws the colour).
+  // the pixel, the centre ray's landing in its cross-section (modeFootprintColor draws the colour).
   tHit = deferredHit;
   work = 0u;
   deferredHit = kNotDeferred;
@@ -698,14 +707,16 @@ vec2 gInsideSpan(GPiece p, vec3 C, vec3 N, vec3 o, vec3 d, vec3 qs, float hi) {
 // the groove's screen direction the pixel square's chord lengths weight the footprint. The stretch
 // of it whose rays land inside the groove (gInsideSpan) takes grooveSamples rays, each followed
 // down the groove's profile in its cross-section and shaded where it lands; the rest lands on the
-// rim's tangent plane, one colour. The weighted mean is the pixel's colour. (Only one groove:
-// where two narrow ones cross inside a pixel, one of them.)
-vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
+// rim's tangent plane, one colour. The weighted mean is the pixel's colour (albedo and world: the
+// hit's; false where no narrow groove draws the pixel). (Only one groove: where two narrow ones
+// cross inside a pixel, one of them.)
+bool modeFootprintColor(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 albedo, vec3 world, out vec3 color) {
+  color = vec3(0.0);
   uint blk = grooveEntry(cell);
-  if (!grooveAA || blk == kNoGrooves) return color;
+  if (!grooveAA || blk == kNoGrooves) return false;
   int best = aaPiece != kAAUnknown ? aaPiece : gAAPiece(c, cell, o, d, tS);
   vec3 hit = o + d * tS;
-  if (best < 0) return color;
+  if (best < 0) return false;
   gLoadAA(cell, best);
   GPiece p = aaP;
   vec3 C;
@@ -714,14 +725,11 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
   vec3 R = toFrame(c, camRight), U = toFrame(c, camUp);
   vec3 e3 = vec3(p.e, ra);
   vec2 g2 = vec2(dot(e3, R), dot(e3, U));
-  if (dot(g2, g2) < 1e-12) return color;
+  if (dot(g2, g2) < 1e-12) return false;
   g2 = normalize(g2);
   vec2 q2 = vec2(-g2.y, g2.x);
   float hi = 0.5 * (abs(q2.x) + abs(q2.y)), lo = 0.5 * abs(abs(q2.x) - abs(q2.y));
   vec3 qs = (R * q2.x + U * q2.y) * pixelAngle;
-  vec3 rel = cellRelativeToCamera(c);
-  vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
-  vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
   vec2 rimSlope = p.e * ra + vec2(-p.e.y, p.e.x) * rx;
   vec2 span = gInsideSpan(p, C, vec3(-rimSlope, 1.0), o, d, qs, hi);
   float wIn = gChordIntegral(span.y, lo, hi) - gChordIntegral(span.x, lo, hi), wOut = hi + lo - wIn;
@@ -736,9 +744,10 @@ vec3 modePostShade(Cell c, int cell, vec3 o, vec3 d, float tS, vec3 color) {
     sum += wt * col;
     wsum += wt;
   }
-  if (!(wsum > 0.0)) return color;
+  if (!(wsum > 0.0)) return false;
   vec3 nRim = normalize(vec3(-rimSlope, 1.0));
   vec3 rim = shade(albedo, c.axisU.xyz * nRim.x + c.axisV.xyz * nRim.y + c.axisW.xyz * nRim.z, world);
-  return (sum / wsum * wIn + rim * wOut) / max(wIn + wOut, 1e-12);
+  color = (sum / wsum * wIn + rim * wOut) / max(wIn + wOut, 1e-12);
+  return true;
 }
 #endif

@@ -48,6 +48,15 @@ bool castHasNormal = false;
 
 uniform bool useColor;
 uniform vec3 baseColor;
+uniform bool wantNormals;  // the normal target is drawn (read back): set where a mode's footprint colour skips the normal
+
+// The hit's shading normal (world): the mode's own, the stored normals, or the height field's gradient.
+vec3 hitNormal(Cell c, vec3 hit) {
+  if (castHasNormal) return c.axisU.xyz * castNormal.x + c.axisV.xyz * castNormal.y + c.axisW.xyz * castNormal.z;
+  if (storedNormals) return sampleNormal(c, hit.xy);
+  vec3 nFrame = gradientNormal(c, hit.xy);
+  return c.axisU.xyz * nFrame.x + c.axisV.xyz * nFrame.y + c.axisW.xyz * nFrame.z;
+}
 
 #include <mode>
 
@@ -111,16 +120,6 @@ void main() {
   if (any(lessThan(hit, bmin - 1e-6 * (bmax - bmin))) || any(greaterThan(hit, bmax + 1e-6 * (bmax - bmin))))
     discard;
 
-  vec3 nWorld;
-  if (castHasNormal) {
-    nWorld = c.axisU.xyz * castNormal.x + c.axisV.xyz * castNormal.y + c.axisW.xyz * castNormal.z;
-  } else if (storedNormals) {
-    nWorld = sampleNormal(c, hit.xy);
-  } else {
-    vec3 nFrame = gradientNormal(c, hit.xy);
-    nWorld = c.axisU.xyz * nFrame.x + c.axisV.xyz * nFrame.y + c.axisW.xyz * nFrame.z;
-  }
-
   // Camera-relative world position of the hit, then its depth.
   vec3 rel = cellRelativeToCamera(c);
   vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
@@ -132,11 +131,17 @@ void main() {
 #ifdef SHADOWS
   if (shadows) inShadow = shadowRay(c, cell, hit, normalize(toFrame(c, lightDir)));
 #endif
-  outColor = vec4(shade(albedo, nWorld, world), 1.0);
-#ifdef MODE_POST_SHADE
-  // A mode that refines the pixel's colour over its footprint (grooves narrower than ~2 pixels).
-  outColor.rgb = modePostShade(c, cell, o, d, tS, outColor.rgb);
+  // A mode may draw the pixel's colour over its footprint (grooves narrower than ~2 pixels): the
+  // hit's own normal is then needed only for the normal target.
+  vec3 color = vec3(0.0);
+  bool footprint = false;
+#ifdef MODE_FOOTPRINT
+  footprint = modeFootprintColor(c, cell, o, d, tS, albedo, world, color);
 #endif
+  vec3 nWorld = vec3(0.0, 0.0, 1.0);
+  if (!footprint || wantNormals) nWorld = hitNormal(c, hit);
+  if (!footprint) color = shade(albedo, nWorld, world);
+  outColor = vec4(color, 1.0);
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), inShadow ? 1.0 : 0.0);
   outCell = uint(cell) + 1u;
