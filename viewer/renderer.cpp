@@ -127,8 +127,9 @@ struct Renderer::Gl {
   GLuint shadowFront[kRenderModes] = {}, shadowInside[kRenderModes] = {};
   // grooves' second pass over the pixels the first deferred (grooves_defer.glsl), packed densely:
   // class 0 (the carved cast), class 1 (the march's hit stands, the footprint's anti-aliasing),
-  // class 0 with self-shadowing (linked when first asked for); the resolve onto the frame.
-  GLuint groovePixel[3] = {}, grooveResolve = 0;
+  // class 0 with self-shadowing (linked when first asked for); the depth buffer from the linear
+  // depth after it (for the decomposition view's box edges).
+  GLuint groovePixel[3] = {}, grooveDepth = 0;
   GLuint splat = 0, points = 0, edl = 0, boxes = 0;  // programs
   GLuint vao = 0, pointVao = 0, cellBuf = 0, itemBuf = 0, pointBuf = 0;
   GLuint mipBuf = 0, mipOffBuf = 0, counterBuf = 0;  // exact: maxima, per-cell offsets; work counters
@@ -138,12 +139,12 @@ struct Renderer::Gl {
   GLuint grooveFieldBuf = 0;                         // grooves: the cells' gap fields (gcast::gapField)
   GLuint grooveTex[3] = {};  // grooves: the field, the block offsets and the words as buffer textures (units 8-10)
   GLuint cellTex = 0;        // grooves' second pass: the cell table as a buffer texture (unit 11)
-  // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): slots a pixel,
-  // flags per 4x4 tile, the lists of tiles and of pixels and their indirect draws; the pack
-  // target the cast draws a list's pixels into (colour, linear depth, normal, cell, as fbo's).
-  GLuint deferSlotsTex = 0, deferTilesTex = 0, deferBuf = 0;
-  uint32_t deferCapacity = 0, packCapacity = 0;  // tiles a list holds, pixels a slot's two lists hold
-  GLuint packFbo = 0, packTex[4] = {};
+  // grooves' deferred pixels at the framebuffer's size (grooves_defer.glsl): slots a pixel, the
+  // lists of pixels and their indirect draws; the pack target the cast runs a list's pixels on
+  // (no attachments: it writes the frame's targets as images).
+  GLuint deferSlotsTex = 0, deferBuf = 0;
+  uint32_t packCapacity = 0;  // pixels a slot's two lists hold
+  GLuint packFbo = 0;
   int packW = 0, packH = 0;
   GLsizeiptr itemCapacity = 0;
   GLuint heightTex = 0, pageColorTex = 0, normalTex = 0;  // heights: R16UI, --gpu-budget RG16UI (with the masks)
@@ -172,17 +173,17 @@ struct Renderer::Gl {
   void releaseTargets() {
     GLuint fbos[] = {fbo, postFbo};
     glDeleteFramebuffers(2, fbos);
-    GLuint tex[] = {colorTex, linearTex, postTex, deferSlotsTex, deferTilesTex, packTex[0], packTex[1], packTex[2], packTex[3]};
-    glDeleteTextures(9, tex);
+    GLuint tex[] = {colorTex, linearTex, frameNormalTex, frameCellTex, postTex, deferSlotsTex};
+    glDeleteTextures(6, tex);
     glDeleteBuffers(1, &deferBuf);
     glDeleteFramebuffers(1, &packFbo);
-    deferSlotsTex = deferTilesTex = deferBuf = packFbo = 0;
-    for (GLuint& t : packTex) t = 0;
-    GLuint rb[] = {depthRb, normalRb, cellRb};
-    glDeleteRenderbuffers(3, rb);
-    fbo = postFbo = colorTex = linearTex = postTex = depthRb = normalRb = cellRb = 0;
+    deferSlotsTex = deferBuf = packFbo = 0;
+    glDeleteRenderbuffers(1, &depthRb);
+    fbo = postFbo = colorTex = linearTex = frameNormalTex = frameCellTex = postTex = depthRb = 0;
   }
-  GLuint fbo = 0, colorTex = 0, linearTex = 0, depthRb = 0, normalRb = 0, cellRb = 0;
+  // The frame's targets: colour, linear depth, normals, cell ids (textures: grooves' second pass
+  // writes them as images), the depth buffer.
+  GLuint fbo = 0, colorTex = 0, linearTex = 0, frameNormalTex = 0, frameCellTex = 0, depthRb = 0;
   GLuint postFbo = 0, postTex = 0;
   bool lastWasPost = false;
   GLuint timeQuery = 0, fragQuery = 0;
@@ -191,7 +192,7 @@ struct Renderer::Gl {
   int fbW = 0, fbH = 0;
   ~Gl() {
     streamer.reset();  // its threads write levels and read the pack: join them before anything goes
-    for (GLuint p : {splat, points, edl, boxes, groovePixel[0], groovePixel[1], groovePixel[2], grooveResolve})
+    for (GLuint p : {splat, points, edl, boxes, groovePixel[0], groovePixel[1], groovePixel[2], grooveDepth})
       if (p) glDeleteProgram(p);
     for (int m = 0; m < kRenderModes; ++m)
       for (GLuint p : {front[m], inside[m], shadowFront[m], shadowInside[m]})
@@ -514,11 +515,11 @@ static uint64_t uploadBlocks(uint32_t cellCount, const uint32_t* entries, uint64
 
 // grooves' deferred pixels (grooves_defer.glsl): slots a pixel (8 bytes each: 4 leave 42 of 17653
 // deferred pixels of Igea's test views to their height field, 3 left 200); the lists' words
-// before their tiles and pixels (defer_lists.glsl): two draw commands and a pixel count a list,
-// then the pixels deferred and those without a slot.
+// before their pixels (defer_lists.glsl): a draw command and a pixel count a list, then the
+// pixels deferred and those without a slot.
 constexpr int kDeferSlots = 4;
 constexpr int kDeferLists = 2 * kDeferSlots;
-constexpr int kDeferCountAt = 4 * kDeferLists * 2 + kDeferLists;
+constexpr int kDeferCountAt = 4 * kDeferLists + kDeferLists;
 constexpr int kDeferHead = kDeferCountAt + 2;
 static std::string deferDefines() { return "#define DEFER_SLOTS " + std::to_string(kDeferSlots) + "\n"; }
 
@@ -581,7 +582,7 @@ Status Renderer::initGrooves(const PackReader& pack, const gcast::SectionView& v
   SA_RETURN_IF_ERROR(link("defer_pack.vert", "parallax.frag", "#define PIXEL_RAYS 1\n" + deferDefines(), g.groovePixel[0], unit));
   SA_RETURN_IF_ERROR(link("defer_pack.vert", "parallax.frag", "#define PIXEL_RAYS 1\n#define GROOVES_HIT_STANDS 1\n" + deferDefines(),
                           g.groovePixel[1], unit));
-  return link("defer_tiles.vert", "defer_resolve.frag", deferDefines(), g.grooveResolve);
+  return link("fullscreen.vert", "depth_from_linear.frag", "", g.grooveDepth);
 }
 
 // Every surface mode this pack can draw: its programs and its baked sections on the GPU.
@@ -818,32 +819,22 @@ static GLuint targetTexture(GLenum format, int width, int height) {
   return t;
 }
 
-// grooves' deferred pixels at the frame's size (grooves_defer.glsl): the slots, the tile flags,
-// the lists, and the pack target (a list holds each pixel at most once: the frame's pixels,
-// rounded up to 4x4 blocks), with the frame's formats.
+// grooves' deferred pixels at the frame's size (grooves_defer.glsl): the slots, the lists, and
+// the pack target (a list holds each pixel at most once: the frame's pixels, rounded up to 4x4
+// blocks), without attachments.
 Status Renderer::createDeferTargets(int width, int height) {
   Gl& g = *gl_;
-  const GLsizei tw = (width + 3) / 4, th = (height + 3) / 4;
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &g.deferSlotsTex);
   glTextureStorage3D(g.deferSlotsTex, 1, GL_R32UI, width, height, 2 * kDeferSlots);
-  glCreateTextures(GL_TEXTURE_2D, 1, &g.deferTilesTex);
-  glTextureStorage2D(g.deferTilesTex, 1, GL_R32UI, tw, th);
-  g.deferCapacity = uint32_t(tw) * uint32_t(th);
-  g.packW = 4 * tw;
-  g.packH = 4 * th;
-  g.packCapacity = 16 * g.deferCapacity;
+  g.packW = 4 * ((width + 3) / 4);
+  g.packH = 4 * ((height + 3) / 4);
+  g.packCapacity = uint32_t(g.packW) * uint32_t(g.packH);
   glCreateBuffers(1, &g.deferBuf);
-  glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + kDeferLists * uint64_t(g.deferCapacity) + kDeferSlots * uint64_t(g.packCapacity)) * 4),
-                       nullptr,
+  glNamedBufferStorage(g.deferBuf, GLsizeiptr((kDeferHead + kDeferSlots * uint64_t(g.packCapacity)) * 4), nullptr,
                        GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
-  const GLenum formats[4] = {GL_RGBA8, GL_R32F, GL_RGBA16F, GL_R32UI};  // colorTex, linearTex, normalRb, cellRb
   glCreateFramebuffers(1, &g.packFbo);
-  for (int i = 0; i < 4; ++i) {
-    g.packTex[i] = targetTexture(formats[i], g.packW, g.packH);
-    glNamedFramebufferTexture(g.packFbo, GLenum(GL_COLOR_ATTACHMENT0 + i), g.packTex[i], 0);
-  }
-  const GLenum bufs[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2, GL_COLOR_ATTACHMENT3};
-  glNamedFramebufferDrawBuffers(g.packFbo, 4, bufs);
+  glNamedFramebufferParameteri(g.packFbo, GL_FRAMEBUFFER_DEFAULT_WIDTH, g.packW);
+  glNamedFramebufferParameteri(g.packFbo, GL_FRAMEBUFFER_DEFAULT_HEIGHT, g.packH);
   if (glCheckNamedFramebufferStatus(g.packFbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
     return Status::internal("grooves' pack target incomplete at " + std::to_string(g.packW) + "x" + std::to_string(g.packH));
   return Status::ok();
@@ -859,17 +850,15 @@ Status Renderer::ensureTargets(int width, int height) {
   g.colorTex = texture(GL_RGBA8);
   g.linearTex = texture(GL_R32F);
   g.postTex = texture(GL_RGBA8);
+  g.frameNormalTex = texture(GL_RGBA16F);
+  g.frameCellTex = texture(GL_R32UI);
   glCreateRenderbuffers(1, &g.depthRb);
-  glCreateRenderbuffers(1, &g.normalRb);
-  glCreateRenderbuffers(1, &g.cellRb);
-  glNamedRenderbufferStorage(g.normalRb, GL_RGBA16F, width, height);
-  glNamedRenderbufferStorage(g.cellRb, GL_R32UI, width, height);
   glNamedRenderbufferStorage(g.depthRb, GL_DEPTH_COMPONENT32F, width, height);
   glCreateFramebuffers(1, &g.fbo);
   glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT0, g.colorTex, 0);
   glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT1, g.linearTex, 0);
-  glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT2, GL_RENDERBUFFER, g.normalRb);
-  glNamedFramebufferRenderbuffer(g.fbo, GL_COLOR_ATTACHMENT3, GL_RENDERBUFFER, g.cellRb);
+  glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT2, g.frameNormalTex, 0);
+  glNamedFramebufferTexture(g.fbo, GL_COLOR_ATTACHMENT3, g.frameCellTex, 0);
   glNamedFramebufferRenderbuffer(g.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depthRb);
   glCreateFramebuffers(1, &g.postFbo);
   glNamedFramebufferTexture(g.postFbo, GL_COLOR_ATTACHMENT0, g.postTex, 0);
@@ -1075,8 +1064,9 @@ void Renderer::drawCells(const VisibleSet& vis, const FrameUniforms& f, const Re
   drawList(ownLists_[2], front(gm), GL_BACK, GL_TRIANGLES, 36);  // gdm's forced cells
   drawList(ownLists_[3], inside(gm), GL_FRONT, GL_TRIANGLES, 36);
   glDisable(GL_CULL_FACE);
-  if (grooves) drawDeferredGrooves(f, s, bufs[2] != GL_NONE);
+  if (grooves) drawDeferredGrooves(f, s, bufs[2] != GL_NONE, bufs[3] != GL_NONE);
   if (!s.showBoxes) return;
+  if (grooves) depthFromLinear(f);
   // The decomposition view: every drawn box's edges, depth-tested against the surface.
   off = 0;
   const GLenum only0[] = {GL_COLOR_ATTACHMENT0, GL_NONE, GL_NONE, GL_NONE};
@@ -1102,70 +1092,72 @@ void Renderer::beginGrooves(const RenderSettings& s, unsigned frontProgram, unsi
   const GLuint zero = 0;
   for (int slot = 0; slot < kDeferSlots; ++slot)  // the cell layers (the hits are written when a slot is taken)
     glClearTexSubImage(g.deferSlotsTex, 0, 0, 0, 2 * slot, g.fbW, g.fbH, 1, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
-  glClearTexImage(g.deferTilesTex, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
-  GLuint head[kDeferHead] = {};  // each list: a point a tile or block, none yet; nothing deferred
-  for (int l = 0; l < 2 * kDeferLists; ++l) head[4 * l] = 1;
+  GLuint head[kDeferHead] = {};  // each list: a point a 4x4 block, none yet; nothing deferred
+  for (int l = 0; l < kDeferLists; ++l) head[4 * l] = 1;
   glNamedBufferSubData(g.deferBuf, 0, sizeof(head), head);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, g.deferBuf);
   glBindImageTexture(3, g.deferSlotsTex, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
-  glBindImageTexture(4, g.deferTilesTex, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
   for (GLuint p : {GLuint(frontProgram), GLuint(insideProgram)}) {
-    glProgramUniform1ui(p, glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
     glProgramUniform1ui(p, glGetUniformLocation(p, "packCapacity"), g.packCapacity);
     glProgramUniform1i(p, glGetUniformLocation(p, "deferAll"), s.shadows && !s.headLight ? 1 : 0);
   }
 }
 
 // grooves' second pass: per list, its class's cast over the list's pixels packed into the pack
-// target, then the resolve over the list's tiles of the frame (grooves_defer.glsl).
-void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s, bool wantNormals) {
+// target, writing the frame's targets (grooves_defer.glsl deferStore), one list after the other.
+void Renderer::drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s, bool wantNormals, bool wantCells) {
   Gl& g = *gl_;
   glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT);
   glBindBuffer(GL_DRAW_INDIRECT_BUFFER, g.deferBuf);
   glEnable(GL_PROGRAM_POINT_SIZE);
-  const GLuint r = g.grooveResolve;
-  setCommonUniforms(r, f, s);
-  glUniform1ui(glGetUniformLocation(r, "deferCapacity"), g.deferCapacity);
-  glUniform2f(glGetUniformLocation(r, "viewportSize"), float(g.fbW), float(g.fbH));
-  for (int i = 0; i < 4; ++i) glBindTextureUnit(GLuint(4 + i), g.packTex[i]);
+  glDisable(GL_DEPTH_TEST);
+  glBindFramebuffer(GL_FRAMEBUFFER, g.packFbo);
+  glViewport(0, 0, g.packW, g.packH);
+  glBindImageTexture(4, g.colorTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA8);
+  glBindImageTexture(5, g.linearTex, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32F);
+  glBindImageTexture(6, g.frameNormalTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_RGBA16F);
+  glBindImageTexture(7, g.frameCellTex, 0, GL_FALSE, 0, GL_WRITE_ONLY, GL_R32UI);
   for (int cls = 0; cls < 2; ++cls) {
     const GLuint p = cls == 0 && s.shadows && !s.headLight ? g.groovePixel[2] : g.groovePixel[cls];
     setCommonUniforms(p, f, s);
-    glUniform1ui(glGetUniformLocation(p, "deferCapacity"), g.deferCapacity);
     glUniform1ui(glGetUniformLocation(p, "packCapacity"), g.packCapacity);
     glUniform1ui(glGetUniformLocation(p, "deferClass"), GLuint(cls));
     glUniform1i(glGetUniformLocation(p, "wantNormals"), wantNormals ? 1 : 0);  // else a narrow groove's footprint skips the hit's
+    glUniform1i(glGetUniformLocation(p, "wantCells"), wantCells ? 1 : 0);
     glUniform2i(glGetUniformLocation(p, "packSize"), g.packW, g.packH);
     glUniform3fv(glGetUniformLocation(p, "rayBase"), 1, f.rayBase.data());
     glUniform3fv(glGetUniformLocation(p, "rayDx"), 1, f.rayDx.data());
     glUniform3fv(glGetUniformLocation(p, "rayDy"), 1, f.rayDy.data());
-    for (int slot = 0; slot < kDeferSlots; ++slot) drawDeferredList(p, 2 * slot + cls, slot, cls);
+    for (int slot = 0; slot < kDeferSlots; ++slot) {
+      const int list = 2 * slot + cls;
+      glUniform1i(glGetUniformLocation(p, "deferSlot"), slot);
+      glUniform1i(glGetUniformLocation(p, "deferList"), list);
+      glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(list) * 16));
+      glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);  // the next list's depth test reads this one's
+    }
   }
-  glViewport(0, 0, g.fbW, g.fbH);
+  glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT | GL_PIXEL_BUFFER_BARRIER_BIT |
+                  GL_TEXTURE_UPDATE_BARRIER_BIT);
   glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glViewport(0, 0, g.fbW, g.fbH);
+  glEnable(GL_DEPTH_TEST);
   glDisable(GL_PROGRAM_POINT_SIZE);
   glBindBuffer(GL_DRAW_INDIRECT_BUFFER, 0);
 }
 
-// One list: the cast into the pack target (no depth there: each pixel once), then the resolve
-// onto the frame, depth-tested.
-void Renderer::drawDeferredList(unsigned castProgram, int list, int slot, int cls) {
+// The depth buffer from the linear depth, where grooves' second pass drew (every pixel: elsewhere
+// the two agree), for the box edges depth-tested after it. Colour targets untouched.
+void Renderer::depthFromLinear(const FrameUniforms& f) {
   Gl& g = *gl_;
-  glBindFramebuffer(GL_FRAMEBUFFER, g.packFbo);
-  glViewport(0, 0, g.packW, g.packH);
-  glUseProgram(castProgram);
-  glUniform1i(glGetUniformLocation(castProgram, "deferSlot"), slot);
-  glUniform1i(glGetUniformLocation(castProgram, "deferList"), list);
-  glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(kDeferLists + list) * 16));
-  glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
-  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
-  glViewport(0, 0, g.fbW, g.fbH);
-  const GLuint r = g.grooveResolve;
-  glUseProgram(r);
-  glUniform1i(glGetUniformLocation(r, "deferSlot"), slot);
-  glUniform1ui(glGetUniformLocation(r, "deferClass"), GLuint(cls));
-  glUniform1i(glGetUniformLocation(r, "deferList"), list);
-  glDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(uintptr_t(list) * 16));
+  const GLenum none[] = {GL_NONE, GL_NONE, GL_NONE, GL_NONE};
+  glNamedFramebufferDrawBuffers(g.fbo, 4, none);
+  glDepthFunc(GL_ALWAYS);
+  glUseProgram(g.grooveDepth);
+  glUniform1f(glGetUniformLocation(g.grooveDepth, "nearPlane"), float(f.nearPlane));
+  glBindTextureUnit(12, g.linearTex);
+  glBindVertexArray(g.vao);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glDepthFunc(GL_GREATER);
 }
 
 void Renderer::readDeferred(FrameStats& st) {

@@ -215,8 +215,8 @@ class Renderer {
   void drawCells(const VisibleSet& vis, const FrameUniforms& f, const RenderSettings& s, const unsigned* bufs);
   void beginGrooves(const RenderSettings& s, unsigned frontProgram, unsigned insideProgram);
   Status ensureShadowPrograms(RenderMode m);
-  void drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s, bool wantNormals);
-  void drawDeferredList(unsigned castProgram, int list, int slot, int cls);
+  void drawDeferredGrooves(const FrameUniforms& f, const RenderSettings& s, bool wantNormals, bool wantCells);
+  void depthFromLinear(const FrameUniforms& f);
   Status createDeferTargets(int width, int height);
   void readDeferred(FrameStats& st);
   Status initModes(const PackReader& pack);

@@ -7,20 +7,19 @@
 //      narrow groove's footprint draws it - the march's hit near the capsules, or in one where
 //      every groove of the cell is narrower than the pixel, the footprint's centre ray's landing
 //      in the groove's cross-section) and the march's hit go to one of DEFER_SLOTS slots of the
-//      pixel; the pixel to the list of that slot and class, its 4x4 tile to the list's tiles;
+//      pixel; the pixel to the list of that slot and class;
 //   2. per list: the cast (PIXEL_RAYS, its class's program; class 1 GROOVES_HIT_STANDS) runs on
-//      the list's pixels packed densely into a pack target (llvmpipe shades 8 pixels at a time,
-//      and a deferred pixel's tile holds 6 of 16 on average), each pixel along its own ray from
-//      the march's hit, for the cell its slot holds; where it draws, the slot's hit layer then
-//      names the pixel's place in the pack target (kNotPacked where it discarded). Then the
-//      resolve (defer_resolve.frag) draws the list's tiles on the frame, each pixel copying its
-//      packed result, depth-tested as the cast's own fragment would be.
+//      the list's pixels packed densely, 16 to a 4x4 block of a target without attachments
+//      (llvmpipe shades 8 pixels at a time, and a deferred pixel's 4x4 tile of the frame holds 6
+//      of 16 on average), each pixel along its own ray from the march's hit, for the cell its slot
+//      holds; it writes the frame's targets as images where its hit is nearer than the frame's
+//      linear depth there (deferStore: the frame's depth test, which the frame's depth buffer
+//      then lacks; the decomposition view's box edges take it from the linear depth).
 // A pixel all of whose slots are taken keeps the height field for one more cell (counted).
 layout(binding = 8) uniform usamplerBuffer grooveFields;  // gcast::gapField (a buffer texture: see grooves.glsl)
 #define grooveField(i) texelFetch(grooveFields, int(i)).r
 // Layers: slot 0's cell + 1 (bit 31: class 1), its march's hit (float bits, -1: a miss); slot 1's ...
 layout(binding = 3, r32ui) uniform coherent uimage2DArray deferSlots;
-layout(binding = 4, r32ui) uniform coherent uimage2D deferTiles;       // per 4x4 pixels: bit s, slot s holds one there
 #include "defer_lists.glsl"
 
 const float kGapTexels = 32.0;  // gcast::kGapFieldTexels
@@ -65,12 +64,8 @@ bool deferPixel(int cell, uint cls, float tHit) {
     uint old = imageAtomicCompSwap(deferSlots, ivec3(px, 2 * s), 0u, id);
     if (old != 0u && old != id) continue;
     imageStore(deferSlots, ivec3(px, 2 * s + 1), uvec4(floatBitsToUint(tHit)));
-    uint list = 2u * uint(s) + cls, bit = 1u << list;
-    if ((imageAtomicOr(deferTiles, px >> 2, bit) & bit) == 0u) {
-      uint k = atomicAdd(deferCmd[4u * list + 1u], 1u);
-      deferItem[list * deferCapacity + k] = (uint(px.y >> 2) << 16) | uint(px.x >> 2);
-    }
     if (old == 0u) {  // the pixel's first claim of the slot (a second fragment of the cell only moves the hit)
+      uint list = 2u * uint(s) + cls;
       uint k = atomicAdd(packCount[list], 1u);
       deferItem[packedPixelItem(list, k)] = (uint(px.y) << 16) | uint(px.x);
       if ((k & 15u) == 0u) atomicAdd(packCmd[4u * list + 1u], 1u);  // a new 4x4 block of the pack target
@@ -89,6 +84,13 @@ uniform uint deferClass;
 uniform int deferList;
 uniform vec3 rayBase, rayDx, rayDy;  // the pixel's ray (world): rayBase + rayDx x + rayDy y at the pixel's centre
 uniform ivec2 packSize;              // the pack target's size (multiples of 4)
+uniform bool wantCells;              // the frame's cell target is drawn (read back)
+
+// The frame's targets (viewer/renderer.cpp ensureTargets).
+layout(binding = 4, rgba8) uniform writeonly image2D frameColor;
+layout(binding = 5, r32f) uniform coherent image2D frameLinear;
+layout(binding = 6, rgba16f) uniform writeonly image2D frameNormal;
+layout(binding = 7, r32ui) uniform writeonly uimage2D frameCell;
 
 // The cell table as a buffer texture (8 texels a Cell): a deferred pixel's cell comes from its
 // slot, and llvmpipe reads a storage buffer at a per-pixel index lane by lane.
@@ -110,13 +112,11 @@ Cell cellAt(int i) {
 // shadow ray marches).
 const float kNotDeferred = -2.0;
 float deferredHit = kNotDeferred;
-const uint kNotPacked = 0xffffffffu;  // the slot's hit layer once the cast discarded the pixel
 ivec2 deferredPixel;
 
 // The frame pixel this fragment of the pack target casts (its list's k-th, k from the fragment's
 // 4x4 block and place in it), the cell its slot holds (false: none, or one of the other class),
-// the camera and the pixel's ray in the cell's frame. Until deferFinish the pixel counts as
-// discarded.
+// the camera and the pixel's ray in the cell's frame.
 bool deferredRay(out int cell, out Cell c, out int steps, out vec3 o, out vec3 d) {
   ivec2 sp = ivec2(gl_FragCoord.xy);
   uint blocksX = uint(packSize.x) >> 2;
@@ -130,7 +130,6 @@ bool deferredRay(out int cell, out Cell c, out int steps, out vec3 o, out vec3 d
   cell = int(id & 0x7fffffffu) - 1;
   steps = 0;
   deferredHit = uintBitsToFloat(imageLoad(deferSlots, ivec3(px, 2 * deferSlot + 1)).x);
-  imageStore(deferSlots, ivec3(px, 2 * deferSlot + 1), uvec4(kNotPacked));
   c = cellAt(cell);
   vec3 rel = cellRelativeToCamera(c);
   o = -vec3(dot(rel, c.axisU.xyz), dot(rel, c.axisV.xyz), dot(rel, c.axisW.xyz));
@@ -139,9 +138,14 @@ bool deferredRay(out int cell, out Cell c, out int steps, out vec3 o, out vec3 d
   return true;
 }
 
-// The cast drew the pixel: the resolve finds its result at this fragment's place.
-void deferFinish() {
-  ivec2 sp = ivec2(gl_FragCoord.xy);
-  imageStore(deferSlots, ivec3(deferredPixel, 2 * deferSlot + 1), uvec4((uint(sp.y) << 16) | uint(sp.x)));
+// The cast's result onto its frame pixel where it is nearer than what the frame holds there (a
+// pixel is in a list once, and the lists are drawn one after the other: no two writes race).
+void deferStore(vec4 color, float viewDepth, vec4 normal, uint cellId) {
+  ivec2 px = deferredPixel;
+  if (!(viewDepth < imageLoad(frameLinear, px).r)) return;
+  imageStore(frameColor, px, color);
+  imageStore(frameLinear, px, vec4(viewDepth));
+  if (wantNormals) imageStore(frameNormal, px, normal);
+  if (wantCells) imageStore(frameCell, px, uvec4(cellId));
 }
 #endif

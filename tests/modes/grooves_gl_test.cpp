@@ -195,10 +195,11 @@ class GroovesGl : public test::GlTest {
     ASSERT_TRUE(r.modeReady(RenderMode::kGrooves));
   }
 
-  FrameResult render(Renderer& r, const Camera& cam, RenderMode mode, bool aa = true) {
+  FrameResult render(Renderer& r, const Camera& cam, RenderMode mode, bool aa = true, bool boxes = false) {
     RenderSettings rs;
     rs.mode = mode;
     rs.grooveAA = aa;
+    rs.showBoxes = boxes;
     FrameResult fr;
     Status s = r.render(cam, rs, fr, kReadColor | kReadDepth);
     EXPECT_TRUE(s.isOk()) << s.message();
@@ -474,7 +475,7 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
   ASSERT_TRUE(r.modeReady(RenderMode::kGrooves));
   const Eigen::Vector3d origin(p.meta().origin);
   const Eigen::Vector3d lo = Eigen::Vector3d(p.meta().boundsMin) + origin, hi = Eigen::Vector3d(p.meta().boundsMax) + origin;
-  size_t far = 0, farSame = 0, near = 0, nearChanged = 0;
+  size_t far = 0, farSame = 0, near = 0, nearChanged = 0, sameDepth = 0, edgesApart = 0;
   double maxWidth = 0;
   for (const Groove& g : set->grooves) maxWidth = std::max(maxWidth, g.width);
   const double margin = 4 * p.meta().sampleSpacing + maxWidth;
@@ -483,6 +484,17 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
     const FrameResult g = render(r, cam, RenderMode::kGrooves), par = render(r, cam, RenderMode::kParallax);
     deferred += g.stats.deferred;
     undeferred += g.stats.undeferred;
+    // The decomposition view's box edges are depth-tested against the surface: where the grooves'
+    // surface is parallax's, the same edges show (the second pass writes the linear depth, and the
+    // depth buffer is rebuilt from it before the edges).
+    const FrameResult gb = render(r, cam, RenderMode::kGrooves, true, true), pb = render(r, cam, RenderMode::kParallax, true, true);
+    for (size_t i = 0; i < g.depth.size(); ++i) {
+      if (!(std::abs(g.depth[i] - par.depth[i]) <= 1e-6f * par.depth[i])) continue;
+      ++sameDepth;
+      const bool edgeG = std::memcmp(&gb.color.rgba[4 * i], &g.color.rgba[4 * i], 3) != 0;
+      const bool edgeP = std::memcmp(&pb.color.rgba[4 * i], &par.color.rgba[4 * i], 3) != 0;
+      edgesApart += edgeG != edgeP;
+    }
     for (int y = 0; y < cam.height; ++y)
       for (int x = 0; x < cam.width; ++x) {
         const size_t i = size_t(y) * cam.width + x;
@@ -518,6 +530,10 @@ TEST_F(GroovesGl, RealScanGroovesDrawOnlyWhereDetected) {
   EXPECT_GT(far, 10000u);
   EXPECT_GE(double(farSame), 0.999 * double(far));
   EXPECT_GT(nearChanged, 0u);
+  std::printf("[grooves-gl] igea --boxes: %zu of %zu pixels where grooves' depth is parallax's show a box edge in one mode only\n",
+              edgesApart, sameDepth);
+  EXPECT_GT(sameDepth, 10000u);
+  EXPECT_LE(double(edgesApart), 1e-4 * double(sameDepth));
 }
 
 // A section of an older version (1: tangent-plane rims) is not misread and does not stop the pack

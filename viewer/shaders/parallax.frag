@@ -75,10 +75,12 @@ uniform float nearPlane;
 uniform bool shadows;       // self-shadowing: a second cast toward lightDir (shadowRay, the mode's unit)
 uniform vec3 viewForward;   // world forward axis of the camera
 
+#ifndef PIXEL_RAYS
 layout(location = 0) out vec4 outColor;
 layout(location = 1) out float outDepth;  // linear view depth along the forward axis
 layout(location = 2) out vec4 outNormal;  // world-space shading normal (eval)
 layout(location = 3) out uint outCell;    // the cell's index + 1 (eval, tests: which cell drew a pixel)
+#endif
 
 void main() {
 #ifdef PIXEL_RAYS
@@ -125,7 +127,9 @@ void main() {
   vec3 world = rel + c.axisU.xyz * hit.x + c.axisV.xyz * hit.y + c.axisW.xyz * hit.z;
   float viewDepth = dot(world, viewForward);
   if (viewDepth <= nearPlane || isClipped(world)) discard;
+#ifndef PIXEL_RAYS
   gl_FragDepth = nearPlane / viewDepth;  // reverse-Z, matches `projection`
+#endif
 
   vec3 albedo = useColor ? sampleColor(c, hit.xy) : baseColor;
 #ifdef SHADOWS
@@ -141,11 +145,13 @@ void main() {
   vec3 nWorld = vec3(0.0, 0.0, 1.0);
   if (!footprint || wantNormals) nWorld = hitNormal(c, hit);
   if (!footprint) color = shade(albedo, nWorld, world);
+#ifdef PIXEL_RAYS
+  // A deferred pixel: onto the frame's targets where the frame's depth test would keep it.
+  deferStore(vec4(color, 1.0), viewDepth, vec4(normalize(nWorld), inShadow ? 1.0 : 0.0), uint(cell) + 1u);
+#else
   outColor = vec4(color, 1.0);
   outDepth = viewDepth;
   outNormal = vec4(normalize(nWorld), inShadow ? 1.0 : 0.0);
   outCell = uint(cell) + 1u;
-#ifdef PIXEL_RAYS
-  deferFinish();  // the resolve copies this fragment's outputs to the pixel (grooves_defer.glsl)
 #endif
 }
