@@ -1,4 +1,4 @@
-// The grooves mode in two passes (viewer/renderer.cpp drawGrooves). A program's size costs
+// The grooves mode in two passes (viewer/renderer.cpp beginGrooves, drawDeferredGrooves). A program's size costs
 // llvmpipe on every pixel it shades, taken branches or not, so the carved cast runs only where
 // it can differ from the height field:
 //   1. the cells with grooves are drawn by the height field's march (GROOVES_DEFER); a pixel whose
