@@ -1,6 +1,6 @@
-// The grooves mode in two passes (viewer/renderer.cpp beginGrooves, drawDeferredGrooves). A program's size costs
-// llvmpipe on every pixel it shades, taken branches or not, so the carved cast runs only where
-// it can differ from the height field:
+// The grooves mode in two passes (viewer/renderer.cpp beginGrooves, drawDeferredGrooves). A
+// program's size costs llvmpipe on every pixel it shades, taken branches or not, so the carved
+// cast runs only where it can differ from the height field:
 //   1. the cells with grooves are drawn by the height field's march (GROOVES_DEFER); a pixel whose
 //      hit lies within reach of a groove (the cell's gap field) is not drawn but deferred: its
 //      cell, its class (0: the carved cast, its hit near a capsule; 1: the anti-aliasing of a
