@@ -197,14 +197,8 @@ void GridKnn::nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<d
   int64_t c[3];
   coords(i, c);
   const size_t want = std::min(n_, size_t(k));
-  // Distance from p to the outside of the block of cells within `ring` (infinite where the block
-  // reaches the grid's edge on both sides of an axis).
   auto proven = [&](int ring) {
-    double g = std::numeric_limits<double>::infinity();
-    for (int a = 0; a < 3; ++a) {
-      if (c[a] - ring > 0) g = std::min(g, p[a] - (lo_[a] + double(c[a] - ring) * cell_));
-      if (c[a] + ring < dims_[a] - 1) g = std::min(g, lo_[a] + double(c[a] + ring + 1) * cell_ - p[a]);
-    }
+    const double g = reach(p, i, ring);
     return best.size() == want && (std::isinf(g) || best.back().first < g * g);
   };
   if (proven(1)) return;
@@ -240,6 +234,41 @@ void GridKnn::nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<d
       std::sort(best.begin(), best.end());
     }
   }
+}
+
+double GridKnn::reach(const double* p, size_t i, int ring) const {
+  int64_t c[3];
+  coords(i, c);
+  double g = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (c[a] - ring > 0) g = std::min(g, p[a] - (lo_[a] + double(c[a] - ring) * cell_));
+    if (c[a] + ring < dims_[a] - 1) g = std::min(g, lo_[a] + double(c[a] + ring + 1) * cell_ - p[a]);
+  }
+  return g;
+}
+
+std::vector<float> GridKnn::blockRank(const float* value, size_t t) const {
+  std::vector<float> out(n_);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, cells_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+    std::vector<float> v;
+    for (size_t ci = r.begin(); ci != r.end(); ++ci) {
+      const Cell& cc = cells_[ci];
+      int64_t c[3], a[3], b[3];
+      coords(order_[cc.begin], c);
+      for (int k = 0; k < 3; ++k) a[k] = std::max<int64_t>(0, c[k] - 1), b[k] = std::min(dims_[k] - 1, c[k] + 1);
+      v.clear();
+      forCells(a, b, [&](const Cell& nb) {
+        for (uint32_t o = nb.begin; o < nb.end; ++o) v.push_back(value[order_[o]]);
+      });
+      float x = -std::numeric_limits<float>::infinity();
+      if (v.size() > t) {
+        std::nth_element(v.begin(), v.begin() + long(t), v.end());
+        x = v[t];
+      }
+      for (uint32_t o = cc.begin; o < cc.end; ++o) out[order_[o]] = x;
+    }
+  });
+  return out;
 }
 
 void GridKnn::forEach(int k, const Visit& fn) const {

@@ -37,6 +37,16 @@ class GridKnn {
   // ascending (unordered: in the grid's order, for callers that only collect). Thread-safe.
   void within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out, bool ordered = true) const;
 
+  // Per point (indexed like pos): the t-th smallest value (0: the smallest) over the points of
+  // the 3x3x3 block of cells around its cell, or -infinity where the block holds t points or
+  // fewer. Any more than t of its neighbours within blockReach(i) have their t-th smallest at
+  // least this.
+  std::vector<float> blockRank(const float* value, size_t t) const;
+  // How far point i lies from the outside of the 3x3x3 block of cells around its cell (infinite
+  // where the block reaches the grid's edge on both sides of every axis): every point within
+  // that distance of it is in the block.
+  double blockReach(size_t i) const { return reach(pos_ + 3 * i, i, 1); }
+
   // The same for one point (tests; the slow path).
   void query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const;
 
@@ -51,6 +61,8 @@ class GridKnn {
     uint32_t begin, end;  // into order_
   };
   int64_t findCell(uint64_t key) const;
+  // Distance from p (point i) to the outside of the block of cells within `ring` of i's cell.
+  double reach(const double* p, size_t i, int ring) const;
   uint64_t keyOf(int64_t x, int64_t y, int64_t z) const;
   void coords(size_t i, int64_t c[3]) const;
   struct Candidates {

@@ -37,12 +37,13 @@ struct SurfaceOptions {
   std::function<void(size_t)> progress;
 };
 
-// The surface through a chunk's points, from one k-nearest-neighbour query per point (FLANN):
+// The surface through a chunk's points, from one k-nearest-neighbour query per point (GridKnn):
 // outliers (flagged 0 in keep), unit normals (PCA of the neighbourhood refined by the MLS
 // quadric, oriented toward the scanner, the file's normal or away from the centre) and, with
 // opt.smooth, positions moved onto the MLS surface where it is one (noise of merged scans
 // averaged out). pos: n xyz-interleaved positions (updated); nrm: n normals (in/out). Points
 // whose neighbourhood is degenerate keep their position and get a zero normal when estimated.
+// An outlier's position and normal are left as the fit made them (callers drop outliers).
 // Returns the number of outliers.
 // localSpacing (may be null): per point, the side of its area, r_8 sqrt(pi / 8) (Spacing::area).
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,

@@ -140,6 +140,92 @@ TEST(GridKnn, WithinMatchesBruteForce) {
   }
 }
 
+// blockRank's bound: for every point, the t-th smallest value over the points within
+// blockReach of it (any set of its neighbours there) is at least the point's blockRank; and the
+// bound is tight somewhere (it is the rank over a real block, not a loose guess).
+TEST(GridKnn, BlockRankBoundsEveryNeighbourhoodWithinReach) {
+  const auto pos = noisySurface(3000, 0.004, 5);
+  const size_t n = pos.size() / 3;
+  std::vector<float> value(n);
+  std::mt19937_64 rng(6);
+  std::uniform_real_distribution<float> u(0, 1);
+  for (float& v : value) v = u(rng);
+  for (double cell : {0.01, 0.05, 0.3}) {
+    const GridKnn g(pos.data(), n, cell);
+    for (size_t t : {size_t(0), size_t(11)}) {
+      const std::vector<float> low = g.blockRank(value.data(), t);
+      ASSERT_EQ(low.size(), n);
+      size_t tight = 0, bounded = 0;
+      for (size_t i = 0; i < n; i += 7) {
+        const double r = std::min(g.blockReach(i), 10.0);
+        std::vector<float> near;
+        for (size_t j = 0; j < n; ++j) {
+          const double dx = pos[3 * j] - pos[3 * i], dy = pos[3 * j + 1] - pos[3 * i + 1], dz = pos[3 * j + 2] - pos[3 * i + 2];
+          if (dx * dx + dy * dy + dz * dz < r * r) near.push_back(value[j]);
+        }
+        if (near.size() <= t) continue;
+        std::nth_element(near.begin(), near.begin() + long(t), near.end());
+        ASSERT_GE(near[t], low[i]) << "point " << i << " cell " << cell << " rank " << t;
+        ++bounded;
+        tight += near[t] == low[i];
+      }
+      if (cell >= 0.05 || t == 0) EXPECT_GT(bounded, 0u) << "cell " << cell << " rank " << t;  // (0.01: blocks of ~3)
+      if (cell >= 0.3) EXPECT_GT(tight, 0u) << "a block as large as the points' extent holds them all";
+    }
+  }
+}
+
+// fitSurface's outlier test against its definition, brute force: a point goes when its mean
+// distance to its 8 nearest exceeds ratio times the median of that mean over its k - 1 nearest
+// others. The cloud makes every path of the test run: a dense sheet (neighbours within the grid
+// block, most points passing on the block's bound), a sparse sheet of more than a third of the
+// points (neighbours beyond the block, listed during the fit up to the cap, asked for again
+// beyond it), strays above both sheets, points just above the dense sheet on either side of the
+// test, and a tight cluster.
+TEST(GridKnn, OutlierTestMatchesItsDefinition) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> e(0, 0.002);
+  std::vector<double> pos;
+  for (int i = 0; i < 2200; ++i) pos.insert(pos.end(), {u(rng), u(rng), e(rng)});                  // dense
+  for (int i = 0; i < 1500; ++i) pos.insert(pos.end(), {2 + 3 * u(rng), 3 * u(rng), e(rng)});      // sparse
+  for (int i = 0; i < 60; ++i) pos.insert(pos.end(), {5 * u(rng), 3 * u(rng), 0.05 + 0.3 * u(rng)});  // strays
+  for (int i = 0; i < 40; ++i) pos.insert(pos.end(), {1.5 + 0.001 * u(rng), 1.5, 0.001 * u(rng)});   // cluster
+  for (int i = 0; i < 150; ++i)  // just above the dense sheet: about 3 times its density, either side of the test
+    pos.insert(pos.end(), {0.1 + 0.8 * u(rng), 0.1 + 0.8 * u(rng), 0.04 + 0.05 * u(rng)});
+  const size_t n = pos.size() / 3;
+  const int k = 24;
+  std::vector<double> density(n);
+  std::vector<std::vector<std::pair<double, uint32_t>>> lists(n);
+  for (size_t i = 0; i < n; ++i) {
+    lists[i] = brute(pos, i, k);
+    double sum = 0;
+    for (size_t j = 1; j < 9; ++j) sum += std::sqrt(lists[i][j].first);
+    density[i] = float(sum / 8);
+  }
+  const double ratio = 3;
+  std::vector<uint8_t> want(n, 1);
+  size_t removed = 0;
+  for (size_t i = 0; i < n; ++i) {
+    std::vector<double> around;
+    for (size_t j = 1; j < lists[i].size(); ++j) around.push_back(density[lists[i][j].second]);
+    std::nth_element(around.begin(), around.begin() + long(around.size() / 2), around.end());
+    if (density[i] > ratio * around[around.size() / 2]) want[i] = 0, ++removed;
+  }
+  ASSERT_GT(removed, 20u) << "the strays go";
+  ASSERT_LT(removed, 200u) << "the sheets stay";
+  SurfaceOptions so;
+  so.neighbours = k;
+  so.smooth = false;
+  so.outlierRatio = ratio;
+  std::vector<double> copy = pos;
+  std::vector<float> nrm(3 * n, 0.f);
+  std::vector<uint8_t> keep;
+  EXPECT_EQ(fitSurface(copy.data(), n, NormalOrientation{}, so, nrm.data(), keep), removed);
+  ASSERT_EQ(keep.size(), n);
+  for (size_t i = 0; i < n; ++i) EXPECT_EQ(keep[i] != 0, want[i] != 0) << "point " << i;
+}
+
 struct Collect : BatchSink {
   std::vector<double> xyz;
   Status onPoints(const PointBatch& b) override {
