@@ -13,6 +13,8 @@
 #include <memory>
 
 #include <Eigen/Geometry>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include "atlas/zstd_context.h"
 #include "common/fileio.h"
@@ -94,25 +96,50 @@ void undeltaPositions(ChunkPoint* r, size_t m, uint32_t shift) {
     }
 }
 
-Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts, size_t n) {
+// One frame of m records coded into out (its header, then the zstd stream); false when zstd fails.
+bool encodeFrame(const ChunkPoint* pts, size_t m, std::vector<uint8_t>& out, std::string& error) {
   ZSTD_CCtx* cctx = threadZstd().c;
-  thread_local std::vector<uint8_t> planes, packed;
+  thread_local std::vector<uint8_t> planes;
   thread_local std::vector<ChunkPoint> frame;
-  for (size_t at = 0; at < n; at += kMaxFrameRecords) {
-    const size_t m = std::min<size_t>(kMaxFrameRecords, n - at);
-    frame.assign(pts + at, pts + at + m);
-    const uint32_t shift = zeroBits(frame.data(), m);
-    deltaPositions(frame.data(), m, shift);
-    planes.resize(m * kRec);
-    shuffleRecords(reinterpret_cast<const uint8_t*>(frame.data()), m, planes.data());
-    packed.resize(ZSTD_compressBound(planes.size()));
-    const size_t c = ZSTD_compressCCtx(cctx, packed.data(), packed.size(), planes.data(), planes.size(), 1);
-    if (ZSTD_isError(c)) return Status::internal(path + ": cannot compress a chunk frame: " + ZSTD_getErrorName(c));
-    const uint32_t head[3] = {uint32_t(m), uint32_t(c), shift};
-    if (std::fwrite(head, 4, 3, f) != 3 || std::fwrite(packed.data(), 1, c, f) != c)
-      return Status::internal(path + ": short write (disk full?)");
-    gScratchBytes += sizeof(head) + c;
-    gScratchRaw += m * kRec;
+  frame.assign(pts, pts + m);
+  const uint32_t shift = zeroBits(frame.data(), m);
+  deltaPositions(frame.data(), m, shift);
+  planes.resize(m * kRec);
+  shuffleRecords(reinterpret_cast<const uint8_t*>(frame.data()), m, planes.data());
+  constexpr size_t kHead = 12;
+  out.resize(kHead + ZSTD_compressBound(planes.size()));
+  const size_t c = ZSTD_compressCCtx(cctx, out.data() + kHead, out.size() - kHead, planes.data(), planes.size(), 1);
+  if (ZSTD_isError(c)) {
+    error = ZSTD_getErrorName(c);
+    return false;
+  }
+  const uint32_t head[3] = {uint32_t(m), uint32_t(c), shift};
+  std::memcpy(out.data(), head, kHead);
+  out.resize(kHead + c);
+  return true;
+}
+
+// Frames are coded on every core, a few per thread at a time, and written in order: the bytes
+// are those of coding them one after the other.
+Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts, size_t n) {
+  const size_t frames = (n + kMaxFrameRecords - 1) / kMaxFrameRecords;
+  const size_t batch = 2 * size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+  std::vector<std::vector<uint8_t>> coded(std::min(frames, batch));
+  std::vector<std::string> errors(coded.size());
+  for (size_t first = 0; first < frames; first += batch) {
+    const size_t count = std::min(batch, frames - first);
+    std::atomic<bool> ok{true};
+    tbb::parallel_for(size_t(0), count, [&](size_t b) {
+      const size_t at = (first + b) * kMaxFrameRecords, m = std::min<size_t>(kMaxFrameRecords, n - at);
+      if (!encodeFrame(pts + at, m, coded[b], errors[b])) ok = false;
+    });
+    for (size_t b = 0; b < count; ++b) {
+      if (!ok && !errors[b].empty()) return Status::internal(path + ": cannot compress a chunk frame: " + errors[b]);
+      if (std::fwrite(coded[b].data(), 1, coded[b].size(), f) != coded[b].size())
+        return Status::internal(path + ": short write (disk full?)");
+      gScratchBytes += coded[b].size();
+      gScratchRaw += std::min<size_t>(kMaxFrameRecords, n - (first + b) * kMaxFrameRecords) * kRec;
+    }
   }
   return Status::ok();
 }

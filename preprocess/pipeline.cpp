@@ -480,13 +480,15 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   // hold what pass B reads.
   if (!job.triangles) roundChunkPositions(job.qz, sp, pos);
   std::vector<ChunkPoint> sorted(n);
-  for (size_t i = 0; i < n; ++i) {
-    const size_t s = idx[i];
-    sorted[i] = pts[s];
-    for (int a = 0; a < 3; ++a) sorted[i].n[a] = std::ldexp(std::nearbyint(std::ldexp(nrm[3 * s + a], kChunkNormalBits)), -kChunkNormalBits);
-    for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
-    if (!job.triangles) sorted[i].vid = sorted[i].scan = 0;
-  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const size_t s = idx[i];
+      sorted[i] = pts[s];
+      for (int a = 0; a < 3; ++a) sorted[i].n[a] = std::ldexp(std::nearbyint(std::ldexp(nrm[3 * s + a], kChunkNormalBits)), -kChunkNormalBits);
+      for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
+      if (!job.triangles) sorted[i].vid = sorted[i].scan = 0;
+    }
+  });
   SA_RETURN_IF_ERROR(saveChunk(ch.path, sorted));
   out.count = n;
   addCells(job.triangles, ci, oc, idx, pos, sorted, out);
