@@ -327,6 +327,19 @@ void GridKnn::within(const double* q, double radius, std::vector<std::pair<doubl
   if (ordered) std::sort(out.begin(), out.end());
 }
 
+void GridKnn::cellsMeeting(const double lo[3], const double hi[3], std::vector<uint32_t>& out) const {
+  out.clear();
+  if (n_ == 0) return;
+  int64_t a[3], b[3];
+  for (int k = 0; k < 3; ++k) {
+    const double l = std::floor((lo[k] - lo_[k]) / cell_), h = std::floor((hi[k] - lo_[k]) / cell_);
+    if (!(h >= 0 && l <= double(dims_[k] - 1))) return;  // the box misses the grid (or is NaN)
+    a[k] = l < 0 ? 0 : int64_t(l);
+    b[k] = h > double(dims_[k] - 1) ? dims_[k] - 1 : int64_t(h);
+  }
+  forCells(a, b, [&](const Cell& cc) { out.insert(out.end(), order_.begin() + cc.begin, order_.begin() + cc.end); });
+}
+
 void GridKnn::query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const {
   ind.clear(), d2.clear();
   if (i >= n_ || k <= 0) return;

@@ -47,6 +47,10 @@ class GridKnn {
   // that distance of it is in the block.
   double blockReach(size_t i) const { return reach(pos_ + 3 * i, i, 1); }
 
+  // Every point in the cells that meet the box [lo, hi] (a superset of the points in the box),
+  // indices in the grid's order.
+  void cellsMeeting(const double lo[3], const double hi[3], std::vector<uint32_t>& out) const;
+
   // The same for one point (tests; the slow path).
   void query(size_t i, int k, std::vector<int>& ind, std::vector<double>& d2) const;
 

@@ -895,7 +895,8 @@ void fieldNormals(const CellRecord& r, const TileGrid& g, const MarginFinder& ma
     hints.insert(hints.end(), {float(n[0]), float(n[1]), float(n[2])});
   }
   std::vector<float> field(hints.size());
-  margins.normalField(xyz.data(), hints.data(), texels.size(), radius, field.data());
+  const MarginFinder::TexelFrame frame{O, U, V, g.u0, g.v0, g.du, g.dv, g.width, g.height, texels.data()};
+  margins.normalField(xyz.data(), hints.data(), texels.size(), radius, field.data(), &frame);
   for (size_t k = 0; k < texels.size(); ++k)
     encodeNormal(field[3 * k], field[3 * k + 1], field[3 * k + 2], &tile.normals[kNormalBytes * texels[k]]);
 }

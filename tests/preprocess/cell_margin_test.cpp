@@ -1,0 +1,75 @@
+// MarginFinder::normalField with a tile's texel frame (the chunk's points binned by texel once
+// per tile) against the plain form (a grid query per texel): the same normals to the bit, on a
+// tilted, curved, noisy sheet with a second layer just over a radius above it and texels past
+// the points' edge.
+#include "preprocess/cell_margin.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstring>
+#include <random>
+
+namespace sa {
+namespace {
+
+TEST(MarginFinder, TileFieldEqualsTheFieldQueriedPerTexel) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> e(0, 0.003);
+  // The frame: tilted about two axes, away from the origin.
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(0.6, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(-0.4, Eigen::Vector3d::UnitY())).toRotationMatrix();
+  const Eigen::Vector3d O(120.5, -40.25, 7.0), U = R.col(0), V = R.col(1), W = R.col(2);
+  auto height = [](double a, double b) { return 0.08 * std::sin(5 * a) * std::cos(4 * b); };
+  std::vector<double> pos;
+  std::vector<float> nrm;
+  auto add = [&](double a, double b, double h, const Eigen::Vector3d& n) {
+    const Eigen::Vector3d p = O + U * a + V * b + W * h;
+    pos.insert(pos.end(), {p.x(), p.y(), p.z()});
+    const Eigen::Vector3d nn = n.normalized();
+    nrm.insert(nrm.end(), {float(nn.x()), float(nn.y()), float(nn.z())});
+  };
+  for (int i = 0; i < 6000; ++i) {
+    const double a = 1.2 * u(rng) - 0.1, b = 1.2 * u(rng) - 0.1;
+    add(a, b, height(a, b) + e(rng), W + 0.3 * (u(rng) - 0.5) * U + 0.3 * (u(rng) - 0.5) * V);
+  }
+  const double radius = 0.04;
+  for (int i = 0; i < 800; ++i) {  // a layer just over a radius above, facing the other way in part
+    const double a = u(rng), b = u(rng);
+    add(a, b, height(a, b) + 1.2 * radius, i % 3 ? W : Eigen::Vector3d(-W));
+  }
+  const size_t n = pos.size() / 3;
+  const MarginFinder mf(pos.data(), nrm.data(), n);
+  // Texels of a 0.02 grid over [0, 1]^2 on the sheet (every third skipped: uncovered).
+  const int width = 50, height_ = 50;
+  const double du = 0.02, dv = 0.02;
+  std::vector<size_t> texels;
+  std::vector<double> xyz;
+  std::vector<float> hints;
+  for (int j = 0; j < height_; ++j)
+    for (int i = 0; i < width; ++i) {
+      if ((i + 2 * j) % 3 == 0) continue;
+      const double a = (i + 0.5) * du, b = (j + 0.5) * dv;
+      const Eigen::Vector3d x = O + U * a + V * b + W * height(a, b);
+      texels.push_back(size_t(j) * width + size_t(i));
+      xyz.insert(xyz.end(), {x.x(), x.y(), x.z()});
+      hints.insert(hints.end(), {float(W.x()), float(W.y()), float(W.z())});
+    }
+  const size_t m = texels.size();
+  std::vector<float> plain(3 * m), tiled(3 * m);
+  mf.normalField(xyz.data(), hints.data(), m, radius, plain.data());
+  const MarginFinder::TexelFrame frame{O, U, V, 0.0, 0.0, du, dv, width, height_, texels.data()};
+  mf.normalField(xyz.data(), hints.data(), m, radius, tiled.data(), &frame);
+  EXPECT_EQ(std::memcmp(plain.data(), tiled.data(), plain.size() * sizeof(float)), 0);
+  size_t moved = 0, differ = 0;
+  for (size_t k = 0; k < 3 * m; ++k) {
+    moved += plain[k] != hints[k];
+    differ += plain[k] != tiled[k];
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GT(moved, m) << "the field is not just the hints";
+}
+
+}  // namespace
+}  // namespace sa
