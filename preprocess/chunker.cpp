@@ -96,8 +96,9 @@ void undeltaPositions(ChunkPoint* r, size_t m, uint32_t shift) {
     }
 }
 
-// One frame of m records coded into out (its header, then the zstd stream); false when zstd fails.
-bool encodeFrame(const ChunkPoint* pts, size_t m, std::vector<uint8_t>& out, std::string& error) {
+// One frame of m records coded into out (its header, then the zstd stream); error set when zstd
+// fails.
+void encodeFrame(const ChunkPoint* pts, size_t m, std::vector<uint8_t>& out, std::string& error) {
   ZSTD_CCtx* cctx = threadZstd().c;
   thread_local std::vector<uint8_t> planes;
   thread_local std::vector<ChunkPoint> frame;
@@ -111,12 +112,11 @@ bool encodeFrame(const ChunkPoint* pts, size_t m, std::vector<uint8_t>& out, std
   const size_t c = ZSTD_compressCCtx(cctx, out.data() + kHead, out.size() - kHead, planes.data(), planes.size(), 1);
   if (ZSTD_isError(c)) {
     error = ZSTD_getErrorName(c);
-    return false;
+    return;
   }
   const uint32_t head[3] = {uint32_t(m), uint32_t(c), shift};
   std::memcpy(out.data(), head, kHead);
   out.resize(kHead + c);
-  return true;
 }
 
 // Frames are coded on every core, a few per thread at a time, and written in order: the bytes
@@ -128,13 +128,12 @@ Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts,
   std::vector<std::string> errors(coded.size());
   for (size_t first = 0; first < frames; first += batch) {
     const size_t count = std::min(batch, frames - first);
-    std::atomic<bool> ok{true};
     tbb::parallel_for(size_t(0), count, [&](size_t b) {
       const size_t at = (first + b) * kMaxFrameRecords, m = std::min<size_t>(kMaxFrameRecords, n - at);
-      if (!encodeFrame(pts + at, m, coded[b], errors[b])) ok = false;
+      encodeFrame(pts + at, m, coded[b], errors[b]);
     });
     for (size_t b = 0; b < count; ++b) {
-      if (!ok && !errors[b].empty()) return Status::internal(path + ": cannot compress a chunk frame: " + errors[b]);
+      if (!errors[b].empty()) return Status::internal(path + ": cannot compress a chunk frame: " + errors[b]);
       if (std::fwrite(coded[b].data(), 1, coded[b].size(), f) != coded[b].size())
         return Status::internal(path + ": short write (disk full?)");
       gScratchBytes += coded[b].size();

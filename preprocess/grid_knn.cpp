@@ -308,13 +308,9 @@ void GridKnn::forEach(int k, const Visit& fn) const {
 void GridKnn::within(const double* q, double radius, std::vector<std::pair<double, uint32_t>>& out, bool ordered) const {
   out.clear();
   if (n_ == 0 || !(radius >= 0)) return;
+  const double qlo[3] = {q[0] - radius, q[1] - radius, q[2] - radius}, qhi[3] = {q[0] + radius, q[1] + radius, q[2] + radius};
   int64_t a[3], b[3];
-  for (int k = 0; k < 3; ++k) {
-    const double lo = std::floor((q[k] - radius - lo_[k]) / cell_), hi = std::floor((q[k] + radius - lo_[k]) / cell_);
-    if (!(hi >= 0 && lo <= double(dims_[k] - 1))) return;  // the ball misses the grid (or q is NaN)
-    a[k] = lo < 0 ? 0 : int64_t(lo);
-    b[k] = hi > double(dims_[k] - 1) ? dims_[k] - 1 : int64_t(hi);
-  }
+  if (!cellRange(qlo, qhi, a, b)) return;  // the ball misses the grid (or q is NaN)
   const double r2 = radius * radius;
   forCells(a, b, [&](const Cell& cc) {
     for (uint32_t o = cc.begin; o < cc.end; ++o) {
@@ -327,16 +323,21 @@ void GridKnn::within(const double* q, double radius, std::vector<std::pair<doubl
   if (ordered) std::sort(out.begin(), out.end());
 }
 
+bool GridKnn::cellRange(const double lo[3], const double hi[3], int64_t a[3], int64_t b[3]) const {
+  for (int k = 0; k < 3; ++k) {
+    const double l = std::floor((lo[k] - lo_[k]) / cell_), h = std::floor((hi[k] - lo_[k]) / cell_);
+    if (!(h >= 0 && l <= double(dims_[k] - 1))) return false;
+    a[k] = l < 0 ? 0 : int64_t(l);
+    b[k] = h > double(dims_[k] - 1) ? dims_[k] - 1 : int64_t(h);
+  }
+  return true;
+}
+
 void GridKnn::cellsMeeting(const double lo[3], const double hi[3], std::vector<uint32_t>& out) const {
   out.clear();
   if (n_ == 0) return;
   int64_t a[3], b[3];
-  for (int k = 0; k < 3; ++k) {
-    const double l = std::floor((lo[k] - lo_[k]) / cell_), h = std::floor((hi[k] - lo_[k]) / cell_);
-    if (!(h >= 0 && l <= double(dims_[k] - 1))) return;  // the box misses the grid (or is NaN)
-    a[k] = l < 0 ? 0 : int64_t(l);
-    b[k] = h > double(dims_[k] - 1) ? dims_[k] - 1 : int64_t(h);
-  }
+  if (!cellRange(lo, hi, a, b)) return;
   forCells(a, b, [&](const Cell& cc) { out.insert(out.end(), order_.begin() + cc.begin, order_.begin() + cc.end); });
 }
 

@@ -65,6 +65,8 @@ class GridKnn {
     uint32_t begin, end;  // into order_
   };
   int64_t findCell(uint64_t key) const;
+  // The cells [a, b] that meet the box [lo, hi]; false when it misses the grid (or is NaN).
+  bool cellRange(const double lo[3], const double hi[3], int64_t a[3], int64_t b[3]) const;
   // Distance from p (point i) to the outside of the block of cells within `ring` of i's cell.
   double reach(const double* p, size_t i, int ring) const;
   uint64_t keyOf(int64_t x, int64_t y, int64_t z) const;
