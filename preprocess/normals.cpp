@@ -316,13 +316,16 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
   // nothing but that point, which is dropped. (The density's own pass was 23 % of the fit's
   // time on the 2 M-point survey.)
   const bool outliers = opt.outlierRatio > 0;
+  // The quadric gives normals and smoothed positions: with the file's normals kept and the
+  // points left where they are, the pass serves only the spacing and the outlier test.
+  const bool fit = opt.estimateNormals || opt.smooth;
   const int kd = int(std::min<size_t>(kDensityNeighbours + 1, n));  // [0] is the point itself
   std::vector<float> density(outliers ? n : 0, 0.f);
   std::vector<uint8_t> place(outliers ? n : 0, kInBlock);
   NeighbourLists weak, listed;
   weak.k = listed.k = k;
   listed.cap = n / kListedShare;
-  grid.forEach(outliers ? std::max(k, kd) : k, [&](size_t i, const int* in, const double* dist, int mq) {
+  grid.forEach(outliers ? std::max(k, kd) : fit ? k : kd, [&](size_t i, const int* in, const double* dist, int mq) {
     tick(2);
     const Eigen::Vector3d p(&src[3 * i]);
     const size_t o = pts.orig[i];
@@ -339,6 +342,7 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
       const double g = grid.blockReach(i);
       if (!(std::isinf(g) || dist[m - 1] < g * g)) place[i] = listed.add(i, in, m) ? kListed : kBeyond;
     }
+    if (!fit) return;
     const LocalSurface ls = fitLocal(src, p, in, dist, m);
     float* out = pts.normal(i);
     const Eigen::Vector3d given(out[0], out[1], out[2]);

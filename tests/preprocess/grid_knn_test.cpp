@@ -182,7 +182,7 @@ TEST(GridKnn, BlockRankBoundsEveryNeighbourhoodWithinReach) {
 // points (neighbours beyond the block, listed during the fit up to the cap, asked for again
 // beyond it), strays above both sheets, points just above the dense sheet on either side of the
 // test, and a tight cluster.
-TEST(GridKnn, OutlierTestMatchesItsDefinition) {
+std::vector<double> outlierCloud() {
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> u(0, 1);
   std::normal_distribution<double> e(0, 0.002);
@@ -193,6 +193,11 @@ TEST(GridKnn, OutlierTestMatchesItsDefinition) {
   for (int i = 0; i < 40; ++i) pos.insert(pos.end(), {1.5 + 0.001 * u(rng), 1.5, 0.001 * u(rng)});   // cluster
   for (int i = 0; i < 150; ++i)  // just above the dense sheet: about 3 times its density, either side of the test
     pos.insert(pos.end(), {0.1 + 0.8 * u(rng), 0.1 + 0.8 * u(rng), 0.04 + 0.05 * u(rng)});
+  return pos;
+}
+
+TEST(GridKnn, OutlierTestMatchesItsDefinition) {
+  const std::vector<double> pos = outlierCloud();
   const size_t n = pos.size() / 3;
   const int k = 24;
   std::vector<double> density(n);
@@ -224,6 +229,38 @@ TEST(GridKnn, OutlierTestMatchesItsDefinition) {
   EXPECT_EQ(fitSurface(copy.data(), n, NormalOrientation{}, so, nrm.data(), keep), removed);
   ASSERT_EQ(keep.size(), n);
   for (size_t i = 0; i < n; ++i) EXPECT_EQ(keep[i] != 0, want[i] != 0) << "point " << i;
+}
+
+// With the file's normals kept and no smoothing the quadric is not fitted: the outliers and the
+// local spacings are those of the pass that fits it, and the positions and normals are the
+// caller's, untouched.
+TEST(GridKnn, GivenNormalsUnsmoothedKeepTheOutliersAndSpacings) {
+  const std::vector<double> pos = outlierCloud();
+  const size_t n = pos.size() / 3;
+  std::vector<float> given(3 * n);
+  for (size_t i = 0; i < n; ++i) given[3 * i + 2] = i % 2 ? 1.f : -1.f;
+  auto run = [&](bool estimate, std::vector<double>& p, std::vector<float>& nrm, std::vector<float>& spacing) {
+    SurfaceOptions so;
+    so.estimateNormals = estimate;
+    so.smooth = false;
+    p = pos;
+    nrm = given;
+    spacing.assign(n, 0.f);
+    std::vector<uint8_t> keep;
+    const size_t removed = fitSurface(p.data(), n, NormalOrientation{}, so, nrm.data(), keep, spacing.data());
+    EXPECT_EQ(size_t(std::count(keep.begin(), keep.end(), 0)), removed);
+    return keep;
+  };
+  std::vector<double> pFit, pGiven;
+  std::vector<float> nFit, nGiven, sFit, sGiven;
+  const std::vector<uint8_t> kFit = run(true, pFit, nFit, sFit), kGiven = run(false, pGiven, nGiven, sGiven);
+  EXPECT_GT(std::count(kFit.begin(), kFit.end(), 0), 20);
+  EXPECT_EQ(kGiven, kFit);
+  EXPECT_EQ(sGiven, sFit);
+  EXPECT_GT(*std::min_element(sGiven.begin(), sGiven.end()), 0.f);
+  EXPECT_EQ(pGiven, pos);
+  EXPECT_EQ(nGiven, given);
+  EXPECT_NE(nFit, given) << "the fitting pass estimates normals";
 }
 
 struct Collect : BatchSink {
