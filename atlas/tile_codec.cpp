@@ -194,10 +194,10 @@ void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g)
   }
 }
 
-// The pyramid blob of region r (empty for a tile too small for a level or a gutter that does
-// not repeat the tile): the coverage mask, the coarsest level's residual planes, then each finer
-// level's other texels against their rebuild from the level above.
-std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level) {
+// The pyramid payload of region r, before zstd (empty for a tile too small for a level or a
+// gutter that does not repeat the tile): the coverage mask, the coarsest level's residual planes,
+// then each finer level's other texels against their rebuild from the level above.
+std::vector<uint8_t> pyramidPayload(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
   if (r.w < 3 || r.h < 3) return {};
   const size_t tb = size_t(layout.texelBytes());
   const std::vector<uint8_t> in = interiorOf(page, pageWidth, r, tb);
@@ -219,9 +219,24 @@ std::vector<uint8_t> encodePyramid(const uint8_t* page, uint32_t pageWidth, Tile
     LevelGrids g = levelOf(in.data(), cov.data(), iw, lv[l], layout);
     encodeOdd(g, lv[l], layout, payload);
   }
+  return payload;
+}
+
+// The pyramid blob: the tag, then the payload's zstd frame.
+std::vector<uint8_t> pyramidBlob(const std::vector<uint8_t>& payload, int level) {
   std::vector<uint8_t> out = compress(payload, level, sizeof kPyramidTag);
   std::copy(std::begin(kPyramidTag), std::end(kPyramidTag), out.begin());
   return out;
+}
+
+// Bytes at zstd's fastest level: which of two payloads codes smaller at the pack's level agrees
+// with it on all but about 2 % of the normal and colour tiles of the real scans and the survey,
+// which then cost 0.04 % more bytes of those pages (docs/BENCHMARKS.md). Coding both at the pack's
+// level cost 8 % of a pack's time.
+size_t quickSize(const std::vector<uint8_t>& bytes) {
+  thread_local std::vector<uint8_t> scratch;
+  scratch.resize(ZSTD_compressBound(bytes.size()));
+  return ZSTD_compressCCtx(threadZstd().c, scratch.data(), scratch.size(), bytes.data(), bytes.size(), 1);
 }
 
 // Reads one zstd frame of exactly `want` bytes.
@@ -336,10 +351,13 @@ size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32
 }
 
 std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level) {
-  std::vector<uint8_t> full = compress(residualPlanes(page, pageWidth, r, layout), level);
-  if (layout.comps == 1) return full;  // heights: LOCO-I alone was as small on the 2 M-point survey
-  std::vector<uint8_t> pyramid = encodePyramid(page, pageWidth, r, layout, level);
-  return !pyramid.empty() && pyramid.size() < full.size() ? pyramid : full;
+  const std::vector<uint8_t> planes = residualPlanes(page, pageWidth, r, layout);
+  if (layout.comps == 1) return compress(planes, level);  // heights: LOCO-I alone was as small on the 2 M-point survey
+  // Normals and colours: the pyramid or LOCO-I, whichever codes smaller (both decode to the
+  // same texels), judged by quickSize.
+  const std::vector<uint8_t> payload = pyramidPayload(page, pageWidth, r, layout);
+  if (!payload.empty() && quickSize(payload) < quickSize(planes)) return pyramidBlob(payload, level);
+  return compress(planes, level);
 }
 
 Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
