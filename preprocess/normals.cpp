@@ -98,19 +98,27 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   // centroid, coordinates scaled by h (conditioning).
   const double h = ls.radius;
   std::array<Eigen::Vector3d, 64> xyz;  // (x, y, z) in that frame
-  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
-  Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+  // A += w f f^T and b += w f z in plain row-major arrays: each entry is its own sum, so the
+  // compiler codes a row's six in vector lanes (Eigen's column-major A(r, q) stayed scalar). The
+  // lower triangle is what the solve reads; each of its entries is summed exactly as before.
+  alignas(16) double a[6][6] = {}, bb[6] = {};
   for (int j = 0; j < cnt; ++j) {
     const double x = d[size_t(j)].dot(u) / h, y = d[size_t(j)].dot(v) / h, z = d[size_t(j)].dot(n) / h;
     xyz[size_t(j)] = {x, y, z};
-    const double f[6] = {1, x, y, x * x, x * y, y * y}, w = wt[size_t(j)];
-    for (int r = 0; r < 6; ++r) {  // the lower triangle of A += w f f^T (Eigen's rankUpdate is a call per row)
+    alignas(16) const double f[6] = {1, x, y, x * x, x * y, y * y};
+    const double w = wt[size_t(j)];
+    for (int r = 0; r < 6; ++r) {
       const double wf = w * f[r];
-      for (int q = 0; q <= r; ++q) A(r, q) += wf * f[q];
-      b[r] += wf * z;
+      for (int q = 0; q < 6; ++q) a[r][q] += wf * f[q];
+      bb[r] += wf * z;
     }
   }
-  A = A.selfadjointView<Eigen::Lower>();
+  Eigen::Matrix<double, 6, 6> A;
+  Eigen::Matrix<double, 6, 1> b;
+  for (int r = 0; r < 6; ++r) {
+    b[r] = bb[r];
+    for (int q = 0; q < 6; ++q) A(r, q) = q <= r ? a[r][q] : a[q][r];
+  }
   A.diagonal().array() += 1e-9 * A.trace();
   Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(A);
   const Eigen::Matrix<double, 6, 1> c = ldlt.solve(b);
