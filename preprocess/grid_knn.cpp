@@ -43,7 +43,7 @@ uint64_t compact(uint64_t v) {  // the inverse of spread
 
 double GridKnn::cellFor(double spacing, int k) { return 1.3 * spacing * std::sqrt(std::max(k, 1) / M_PI); }
 
-GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell) {
+GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell), sortedPos_(nullptr) {
   double hi[3];
   for (int a = 0; a < 3; ++a) lo_[a] = std::numeric_limits<double>::infinity(), hi[a] = -lo_[a];
   for (size_t i = 0; i < n; ++i)
@@ -72,6 +72,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
       for (int a = 0; a < 3; ++a) sorted_[3 * i + a] = pos[3 * size_t(keyed[i].second) + a];
     }
   });
+  sortedPos_ = sorted_.data();
   for (size_t i = 0; i < n; ++i) {
     if (i == 0 || keyed[i].first != keyed[i - 1].first) cells_.push_back({keyed[i].first, uint32_t(i), uint32_t(i)});
     cells_.back().end = uint32_t(i + 1);
@@ -85,6 +86,20 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
     while (table_[h] >= 0) h = (h + 1) & mask_;
     table_[h] = int64_t(c);
   }
+}
+
+// The points' extent, the cells and their Morton order are the same for any numbering of the
+// points; within a cell the points stay in the same sequence (by index before, by place now).
+GridKnn GridKnn::inOrder(std::vector<double>& src, std::vector<uint32_t>& orig) && {
+  GridKnn g = std::move(*this);
+  orig = std::move(g.order_);
+  src = std::move(g.sorted_);
+  g.pos_ = g.sortedPos_ = src.data();
+  g.order_.resize(g.n_);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, g.n_, 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) g.order_[i] = uint32_t(i);
+  });
+  return g;
 }
 
 uint64_t GridKnn::keyOf(int64_t x, int64_t y, int64_t z) const {
@@ -123,7 +138,7 @@ void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
   forCells(a, b, [&](const Cell& cc) {
     out.index.insert(out.index.end(), order_.begin() + cc.begin, order_.begin() + cc.end);
     for (uint32_t o = cc.begin; o < cc.end; ++o) {
-      const double* q = &sorted_[3 * size_t(o)];
+      const double* q = &sortedPos_[3 * size_t(o)];
       out.x.push_back(q[0]), out.y.push_back(q[1]), out.z.push_back(q[2]);
     }
   });
@@ -220,7 +235,7 @@ void GridKnn::nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<d
     if (best.size() == want && d2 > best.back().first) continue;
     for (uint32_t o = cc.begin; o < cc.end; ++o) {
       const uint32_t j = order_[o];
-      const double* q = &sorted_[3 * size_t(o)];
+      const double* q = &sortedPos_[3 * size_t(o)];
       const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
       const std::pair<double, uint32_t> e(dx * dx + dy * dy + dz * dz, j);
       if (std::find(best.begin(), best.end(), e) != best.end()) continue;
@@ -314,7 +329,7 @@ void GridKnn::within(const double* q, double radius, std::vector<std::pair<doubl
   const double r2 = radius * radius;
   forCells(a, b, [&](const Cell& cc) {
     for (uint32_t o = cc.begin; o < cc.end; ++o) {
-      const double* p = &sorted_[3 * size_t(o)];
+      const double* p = &sortedPos_[3 * size_t(o)];
       const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
       const double d2 = dx * dx + dy * dy + dz * dz;
       if (d2 <= r2) out.emplace_back(d2, order_[o]);

@@ -22,6 +22,14 @@ class GridKnn {
   // pos: n xyz-interleaved points (kept by reference: must outlive the index). cell: the grid's
   // cell side (> 0; widened where the extent would need more than 2^20 cells per axis).
   GridKnn(const double* pos, size_t n, double cell);
+  GridKnn(GridKnn&&) = default;
+  GridKnn(const GridKnn&) = delete;  // would share the positions it sorted
+  GridKnn& operator=(const GridKnn&) = delete;
+
+  // This grid, its points renumbered in its order (point k is the caller's order()[k], now in
+  // orig): the grid GridKnn(src, n, cell) builds over src, the positions in that order, without
+  // sorting them again. src and orig are the caller's; src is kept by reference.
+  GridKnn inOrder(std::vector<double>& src, std::vector<uint32_t>& orig) &&;
 
   // A cell side for k neighbours on a surface sampled with area spacing `spacing` (the side
   // of the area per point): the k-th neighbour usually lies within it.
@@ -96,6 +104,7 @@ class GridKnn {
   int64_t dims_[3];
   std::vector<uint32_t> order_;  // point indices sorted by cell
   std::vector<double> sorted_;   // their positions in that order
+  const double* sortedPos_;      // sorted_, or pos_ where the points are in the grid's order
   std::vector<Cell> cells_;
   std::vector<int64_t> table_;  // open addressing: cell index or -1
   uint64_t mask_ = 0;

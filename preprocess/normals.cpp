@@ -386,19 +386,18 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   keep.assign(n, 1);
   if (n == 0) return 0;
   const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
-  const Spacing sp = estimateSpacing(pos, n);
-  const double cell = GridKnn::cellFor(sp.area > 0 ? sp.area : sp.nearest, k);
+  double spacing = opt.spacing;
+  if (!(spacing > 0)) {
+    const Spacing sp = estimateSpacing(pos, n);
+    spacing = sp.area > 0 ? sp.area : sp.nearest;
+  }
   // Every pass visits the points in the grid's spatial order, reading a copy of the positions
   // in that order (smoothed positions go to pos, which no pass reads): in a file's order a
   // point's neighbours lie all over the chunk's arrays, and at millions of points the fit
   // mostly waited for memory.
-  const std::vector<uint32_t> orig = GridKnn(pos, n, cell).order();
-  std::vector<double> src(3 * n);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i)
-      for (int c = 0; c < 3; ++c) src[3 * i + c] = pos[3 * size_t(orig[i]) + c];
-  });
-  const GridKnn grid(src.data(), n, cell);
+  std::vector<uint32_t> orig;
+  std::vector<double> src;
+  const GridKnn grid = GridKnn(pos, n, GridKnn::cellFor(spacing, k)).inOrder(src, orig);
   const size_t removed = fitOrdered(grid, {src.data(), orig.data(), nrm, keep.data()}, n, k, orient, opt, pos, localSpacing);
   return removed;
 }

@@ -32,6 +32,9 @@ struct SurfaceOptions {
   // A point whose mean distance to its 8 nearest neighbours exceeds this many times the
   // median of its neighbours' is an outlier (0: keep all).
   double outlierRatio = 3;
+  // The points' spacing when the caller has it (estimateSpacing(pos, n): its area spacing, else
+  // its nearest), which sizes the neighbour grid; 0: estimated here.
+  double spacing = 0;
   // Progress of long fits, called now and then from any thread with the units done since the
   // last call; the whole fit is 2 units a point. May be empty.
   std::function<void(size_t)> progress;

@@ -241,7 +241,8 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
 // Drops the outliers from pts, pos and nrm.
 // Returns how many outliers it dropped.
 size_t fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
-                       double chunkSpacing, ChunkTicker& ticker) {
+                       const Spacing& spacing, ChunkTicker& ticker) {
+  const double chunkSpacing = spacing.nearest;
   NormalOrientation orient;
   orient.towardScanner = job.input.towardScanner();
   orient.center = job.bounds.centroid - job.origin;
@@ -253,6 +254,7 @@ size_t fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::ve
   so.estimateNormals = !job.fileNormals;
   so.smooth = job.opt.smooth;
   so.outlierRatio = job.opt.outlierRatio;
+  so.spacing = spacing.area > 0 ? spacing.area : spacing.nearest;
   so.progress = [&](size_t n) { ticker.add(n); };
   std::vector<uint8_t> keep;
   std::vector<float> local(pts.size(), 0.f);
@@ -276,10 +278,12 @@ size_t fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::ve
 
 // Sample spacing of a chunk's input points (points sampled on large triangles left out).
 Spacing chunkSpacing(const std::vector<ChunkPoint>& pts, const std::vector<double>& pos) {
+  const bool sampled = std::any_of(pts.begin(), pts.end(), [](const ChunkPoint& p) { return p.flags & kChunkSurfaceSample; });
+  if (!sampled) return estimateSpacing(pos.data(), pts.size());
   std::vector<double> real;
   for (size_t i = 0; i < pts.size(); ++i)
     if (!(pts[i].flags & kChunkSurfaceSample)) real.insert(real.end(), &pos[3 * i], &pos[3 * i] + 3);
-  return real.size() == pos.size() ? estimateSpacing(pos.data(), pts.size()) : estimateSpacing(real.data(), real.size() / 3);
+  return estimateSpacing(real.data(), real.size() / 3);
 }
 
 // What pass A found in one chunk, before it joins the job (mergeChunkCells): computed by the
@@ -445,7 +449,7 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   out.areaSpacing = std::max(spacing.area, sp);
   out.weight = pts.size();
   ChunkTicker ticker(progress, "octree", before, pts.size(), total, 2);
-  if (!job.triangles) out.outliers = fitChunkSurface(job, pts, pos, nrm, sp, ticker);
+  if (!job.triangles) out.outliers = fitChunkSurface(job, pts, pos, nrm, spacing, ticker);
   const size_t n = pts.size();
   std::vector<uint32_t> idx(n);
   for (uint32_t i = 0; i < n; ++i) idx[i] = i;
