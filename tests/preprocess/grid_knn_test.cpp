@@ -113,6 +113,40 @@ TEST(GridKnn, HugeExtentKeepsTheGridBounded) {
 // Radius queries (the margin finder's and the normal field's): every point within r, ascending
 // (or in any order when asked), from query positions inside, at the edge of and outside the
 // points' extent.
+// A grid renumbered in its own order answers as a grid built afresh over the points in that
+// order: the same neighbours, distances, block ranks and reaches (fitSurface's neighbour grid).
+TEST(GridKnn, InOrderEqualsAGridBuiltOnTheSortedPoints) {
+  std::vector<double> pos = noisySurface(3000, 0.003, 11);
+  for (int i = 0; i < 40; ++i) pos.insert(pos.end(), {pos[3 * size_t(i)], pos[3 * size_t(i) + 1], pos[3 * size_t(i) + 2]});  // duplicates
+  const size_t n = pos.size() / 3;
+  const double cell = 0.04;
+  std::vector<double> src;
+  std::vector<uint32_t> orig;
+  const GridKnn renumbered = GridKnn(pos.data(), n, cell).inOrder(src, orig);
+  ASSERT_EQ(orig.size(), n);
+  ASSERT_EQ(src.size(), 3 * n);
+  for (size_t k = 0; k < n; ++k)
+    for (int a = 0; a < 3; ++a) ASSERT_EQ(src[3 * k + a], pos[3 * size_t(orig[k]) + a]) << "point " << k;
+  std::vector<uint32_t> sortedOrig = orig;
+  std::sort(sortedOrig.begin(), sortedOrig.end());
+  for (size_t k = 0; k < n; ++k) ASSERT_EQ(sortedOrig[k], k) << "orig is a permutation";
+  const std::vector<double> copy = src;
+  const GridKnn fresh(copy.data(), n, cell);
+  for (size_t k = 0; k < n; ++k) ASSERT_EQ(fresh.order()[k], k) << "the sorted points are in the fresh grid's order";
+  auto answers = [&](const GridKnn& g) {
+    std::vector<std::vector<std::pair<double, int>>> out(n);
+    g.forEach(24, [&](size_t i, const int* ind, const double* d2, int m) {
+      for (int j = 0; j < m; ++j) out[i].emplace_back(d2[j], ind[j]);
+    });
+    return out;
+  };
+  EXPECT_EQ(answers(renumbered), answers(fresh));
+  std::vector<float> value(n);
+  for (size_t k = 0; k < n; ++k) value[k] = float(src[3 * k + 2]);
+  EXPECT_EQ(renumbered.blockRank(value.data(), 5), fresh.blockRank(value.data(), 5));
+  for (size_t k = 0; k < n; k += 13) EXPECT_EQ(renumbered.blockReach(k), fresh.blockReach(k)) << "point " << k;
+}
+
 TEST(GridKnn, WithinMatchesBruteForce) {
   const auto pos = noisySurface(5000, 0.003, 3);
   const size_t n = pos.size() / 3;
