@@ -344,46 +344,57 @@ float medianSpacing(const std::vector<ChunkPoint>& sorted, uint32_t first, uint3
   return float(s[s.size() / 2] * chunkSpacing / 1024);
 }
 
-// Records the octree's cells of a chunk (frames, extents, which vertices and samples they hold).
+// One of the octree's cells of chunk ci: its frame, its extent in that frame, its points.
+WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>& idx, const std::vector<double>& pos,
+                  const std::vector<ChunkPoint>& sorted, double chunkSpacing) {
+  WorkCell wc;
+  wc.chunk = ci;
+  wc.first = c.first;
+  wc.count = c.count;
+  const PlaneFit& f = c.fit;
+  for (int a = 0; a < 3; ++a) {
+    wc.rec.origin[a] = f.centroid[a];
+    wc.rec.u[a] = f.u[a];
+    wc.rec.v[a] = f.v[a];
+    wc.rec.w[a] = f.w[a];
+  }
+  wc.rec.level = static_cast<uint8_t>(std::min(c.level, 255));
+  wc.rec.flags = (c.forced ? kCellForced : 0) | (f.degenerate ? kCellDegenerate : 0);
+  double e[6] = {1e300, -1e300, 1e300, -1e300, 1e300, -1e300};
+  uint32_t real = 0;
+  for (uint32_t k = c.first; k < c.first + c.count; ++k) {
+    const Eigen::Vector3d d = vec(&pos[3 * size_t(idx[k])]) - f.centroid;
+    const double uvw[3] = {d.dot(f.u), d.dot(f.v), d.dot(f.w)};
+    for (int a = 0; a < 3; ++a) {
+      e[2 * a] = std::min(e[2 * a], uvw[a]);
+      e[2 * a + 1] = std::max(e[2 * a + 1], uvw[a]);
+    }
+    if (sorted[k].flags & kChunkSurfaceSample) wc.sampled = true;
+    else ++real;
+  }
+  wc.rec.pointCount = real;
+  wc.spacing = medianSpacing(sorted, c.first, c.count, chunkSpacing);
+  std::copy(e, e + 6, wc.ext);
+  return wc;
+}
+
+// Records the octree's cells of a chunk (frames, extents, which vertices and samples they hold):
+// the cells on every core, then the lists of samples and vertices in cell order.
 void addCells(bool triangles, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
               const std::vector<double>& pos, const std::vector<ChunkPoint>& sorted, ChunkCells& out) {
-  for (const OctreeCell& c : oc) {
-    WorkCell wc;
-    wc.chunk = ci;
-    wc.first = c.first;
-    wc.count = c.count;
-    const PlaneFit& f = c.fit;
-    for (int a = 0; a < 3; ++a) {
-      wc.rec.origin[a] = f.centroid[a];
-      wc.rec.u[a] = f.u[a];
-      wc.rec.v[a] = f.v[a];
-      wc.rec.w[a] = f.w[a];
+  const size_t base = out.cells.size();
+  out.cells.resize(base + oc.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, oc.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t k = r.begin(); k != r.end(); ++k) out.cells[base + k] = workCell(ci, oc[k], idx, pos, sorted, out.spacing);
+  });
+  for (size_t k = 0; k < oc.size(); ++k) {
+    const OctreeCell& c = oc[k];
+    const uint32_t cellId = static_cast<uint32_t>(base + k);
+    out.layered += c.fit.layered;
+    for (uint32_t i = c.first; i < c.first + c.count; ++i) {
+      if (sorted[i].flags & kChunkSurfaceSample) out.samples.emplace_back(sorted[i].vid, cellId);
+      else if (triangles) out.vertexCells.emplace_back(sorted[i].vid, cellId);
     }
-    wc.rec.level = static_cast<uint8_t>(std::min(c.level, 255));
-    wc.rec.flags = (c.forced ? kCellForced : 0) | (f.degenerate ? kCellDegenerate : 0);
-    out.layered += f.layered;
-    double e[6] = {1e300, -1e300, 1e300, -1e300, 1e300, -1e300};
-    uint32_t real = 0;
-    const uint32_t cellId = static_cast<uint32_t>(out.cells.size());
-    for (uint32_t k = c.first; k < c.first + c.count; ++k) {
-      const Eigen::Vector3d d = vec(&pos[3 * size_t(idx[k])]) - f.centroid;
-      const double uvw[3] = {d.dot(f.u), d.dot(f.v), d.dot(f.w)};
-      for (int a = 0; a < 3; ++a) {
-        e[2 * a] = std::min(e[2 * a], uvw[a]);
-        e[2 * a + 1] = std::max(e[2 * a + 1], uvw[a]);
-      }
-      if (sorted[k].flags & kChunkSurfaceSample) {
-        out.samples.emplace_back(sorted[k].vid, cellId);
-        wc.sampled = true;
-      } else {
-        ++real;
-        if (triangles) out.vertexCells.emplace_back(sorted[k].vid, cellId);
-      }
-    }
-    wc.rec.pointCount = real;
-    wc.spacing = medianSpacing(sorted, c.first, c.count, out.spacing);
-    std::copy(e, e + 6, wc.ext);
-    out.cells.push_back(wc);
   }
 }
 
@@ -424,11 +435,13 @@ void roundChunkPositions(const Quantizer& qz, double spacing, std::vector<double
   const int bits = std::clamp(int(std::floor(std::log2(std::ldexp(spacing, -kChunkPositionBits) / unit))), 0, 24);
   if (bits == 0) return;
   const uint32_t half = 1u << (bits - 1), mask = ~((1u << bits) - 1);
-  for (size_t i = 0; i < pos.size(); ++i) {
-    const uint32_t q = qz.encode(pos[i], int(i % 3));
-    const uint32_t r = q >= mask ? (q & mask) : ((q + half) & mask);
-    pos[i] = qz.decode(r, int(i % 3));
-  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pos.size(), 3 << 14), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const uint32_t q = qz.encode(pos[i], int(i % 3));
+      const uint32_t rounded = q >= mask ? (q & mask) : ((q + half) & mask);
+      pos[i] = qz.decode(rounded, int(i % 3));
+    }
+  });
 }
 
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
