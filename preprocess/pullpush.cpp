@@ -37,6 +37,25 @@ struct Quadric {
     return b;
   }
   double operator()(double u, double v) const { return c.dot(basis(u, v)); }
+  // Its value at every texel centre of g, row by row: (*this)(u, v) to the bit, with the
+  // coordinates' divisions once a column and a row instead of once a texel, and the dot
+  // product's terms summed as Eigen's two-lane dot above sums them.
+  std::vector<double> atTexels(const TileGrid& g) const {
+    const int W = g.width, H = g.height;
+    std::vector<double> xs(size_t(W), 0.0), out(size_t(W) * H);
+    for (int x = 0; x < W; ++x) xs[size_t(x)] = (g.u0 + (x + 0.5) * g.du - cu) / su;
+    for (int yi = 0; yi < H; ++yi) {
+      const double y = (g.v0 + (yi + 0.5) * g.dv - cv) / sv, yc2 = y * c[2], y2c5 = y * y * c[5];
+      double* row = &out[size_t(yi) * W];
+      for (int xi = 0; xi < W; ++xi) {
+        const double x = xs[size_t(xi)];
+        const double even = (x * y * c[4] + yc2) + c[0];
+        const double odd = (y2c5 + x * x * c[3]) + x * c[1];
+        row[xi] = even + odd;
+      }
+    }
+    return out;
+  }
 };
 
 Quadric fitQuadric(const TileGrid& g, const double* u, const double* v, const double* w, size_t n) {
@@ -211,11 +230,10 @@ Level makeLevel(int w, int h, int channels) {
 // texel. With normals, a sample contributes its tangent plane at the texel, not its own height:
 // planes are reconstructed exactly and the surface near a tile's edge, reached by few samples,
 // follows their slope instead of bending toward the tile's trend.
-void splat(const TileGrid& g, const TileSamples& s, const Quadric& trend, double radius, const Channels& ch, Level& L) {
-  const int W = g.width, H = g.height, C = ch.count;
-  std::vector<double> trendAt(size_t(W) * H);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) trendAt[size_t(y) * W + x] = trend(g.u0 + (x + 0.5) * g.du, g.v0 + (y + 0.5) * g.dv);
+void splat(const TileGrid& g, const TileSamples& s, const std::vector<double>& trendAt, double radius, const Channels& ch,
+           Level& L) {
+  const int W = g.width, C = ch.count;
+  const int H = g.height;
   double gu = 0, gv = 0;  // the current sample's slope
   auto add = [&](size_t i, int x, int y, double wt) {
     const size_t t = size_t(y) * W + x;
@@ -325,7 +343,7 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
   const int W = g.width, H = g.height;
   const Channels ch(s);
   const int C = ch.count;
-  const Quadric trend = fitQuadric(g, s.u, s.v, s.w, s.n);
+  const std::vector<double> trend = fitQuadric(g, s.u, s.v, s.w, s.n).atTexels(g);
   std::vector<Level> lv;
   lv.push_back(makeLevel(W, H, C));
   splat(g, s, trend, opt.splatRadius, ch, lv[0]);
@@ -337,11 +355,8 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
   // The reconstructed surface everywhere (push filled every texel the samples reach).
   const Level& L = lv[0];
   std::vector<double> surface(size_t(W) * H, NAN);
-  for (size_t t = 0; t < surface.size(); ++t) {
-    if (L.weight[t] <= 0) continue;
-    const int i = static_cast<int>(t % size_t(W)), j = static_cast<int>(t / size_t(W));
-    surface[t] = L.value[t] + trend(g.u0 + (i + 0.5) * g.du, g.v0 + (j + 0.5) * g.dv);
-  }
+  for (size_t t = 0; t < surface.size(); ++t)
+    if (L.weight[t] > 0) surface[t] = L.value[t] + trend[t];
   std::vector<uint8_t> covered = coverage3d(g, s, surface, opt.coverageRadius);
   closeCracks(W, H, surface, std::max(g.du, g.dv), covered);
   closeSmallHoles(g, surface, opt.gapReach, covered);
