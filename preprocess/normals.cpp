@@ -382,7 +382,7 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
 }  // namespace
 
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
-                  std::vector<uint8_t>& keep, float* localSpacing) {
+                  std::vector<uint8_t>& keep, float* localSpacing, std::vector<uint32_t>* order) {
   keep.assign(n, 1);
   if (n == 0) return 0;
   const int k = static_cast<int>(std::min<size_t>(std::max(opt.neighbours, 3), n));
@@ -399,6 +399,7 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   std::vector<double> src;
   const GridKnn grid = GridKnn(pos, n, GridKnn::cellFor(spacing, k)).inOrder(src, orig);
   const size_t removed = fitOrdered(grid, {src.data(), orig.data(), nrm, keep.data()}, n, k, orient, opt, pos, localSpacing);
+  if (order) *order = std::move(orig);
   return removed;
 }
 

@@ -49,8 +49,10 @@ struct SurfaceOptions {
 // An outlier's position and normal are left as the fit made them (callers drop outliers).
 // Returns the number of outliers.
 // localSpacing (may be null): per point, the side of its area, r_8 sqrt(pi / 8) (Spacing::area).
+// order (may be null): the points in the neighbour grid's order (by cell, the cells in Morton
+// order), for callers that lay their arrays out in space.
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
-                  std::vector<uint8_t>& keep, float* localSpacing = nullptr);
+                  std::vector<uint8_t>& keep, float* localSpacing = nullptr, std::vector<uint32_t>* order = nullptr);
 
 // pos: n xyz-interleaved positions. Writes n unit normals (xyz-interleaved) into nrm.
 // Points with fewer than 3 distinct neighbours get a zero normal (unknown).

@@ -237,11 +237,45 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
   }
 }
 
+// pts, pos and nrm without the outliers and laid out in the fit's grid order (space-filling):
+// kept point i of the file's order (i counting kept points only) is now at place[i]. The octree
+// and the chunk's rewrite, which visit the points by cell, then read nearby memory; the
+// octree's index array holds the places in that order, so it splits the points exactly as it
+// did over the file's order and its sums add the same numbers in the same order.
+std::vector<uint32_t> layOut(std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
+                             const std::vector<uint8_t>& keep, const std::vector<uint32_t>& order) {
+  const size_t n = pts.size();
+  std::vector<uint32_t> rank(n), place;  // rank: a kept point's index among the kept
+  uint32_t m = 0;
+  for (size_t i = 0; i < n; ++i) rank[i] = keep[i] ? m++ : UINT32_MAX;
+  std::vector<uint32_t> from;  // from[j]: the old index of the point now at j
+  from.reserve(m);
+  place.resize(m);
+  for (uint32_t o : order)
+    if (keep[o]) {
+      place[rank[o]] = uint32_t(from.size());
+      from.push_back(o);
+    }
+  auto permute = [&](auto& v, size_t width) {
+    std::remove_reference_t<decltype(v)> out(width * m);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t j = r.begin(); j != r.end(); ++j)
+        std::copy_n(&v[width * size_t(from[j])], width, &out[width * j]);
+    });
+    v = std::move(out);
+  };
+  permute(pts, 1);
+  permute(pos, 3);
+  permute(nrm, 3);
+  return place;
+}
+
 // Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h).
-// Drops the outliers from pts, pos and nrm.
-// Returns how many outliers it dropped.
-size_t fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
-                       const Spacing& spacing, ChunkTicker& ticker) {
+// Drops the outliers from pts, pos and nrm and lays them out in space (layOut): returns where
+// each kept point went, the octree's first index array.
+std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos,
+                                      std::vector<float>& nrm, const Spacing& spacing, ChunkTicker& ticker,
+                                      uint64_t& removed) {
   const double chunkSpacing = spacing.nearest;
   NormalOrientation orient;
   orient.towardScanner = job.input.towardScanner();
@@ -258,22 +292,11 @@ size_t fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::ve
   so.progress = [&](size_t n) { ticker.add(n); };
   std::vector<uint8_t> keep;
   std::vector<float> local(pts.size(), 0.f);
-  const size_t removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data());
+  std::vector<uint32_t> order;
+  removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data(), &order);
   for (size_t i = 0; i < pts.size(); ++i)
     pts[i].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
-  if (removed == 0) return 0;
-  size_t m = 0;
-  for (size_t i = 0; i < pts.size(); ++i) {
-    if (!keep[i]) continue;
-    pts[m] = pts[i];
-    std::copy(&pos[3 * i], &pos[3 * i] + 3, &pos[3 * m]);
-    std::copy(&nrm[3 * i], &nrm[3 * i] + 3, &nrm[3 * m]);
-    ++m;
-  }
-  pts.resize(m);
-  pos.resize(3 * m);
-  nrm.resize(3 * m);
-  return removed;
+  return layOut(pts, pos, nrm, keep, order);
 }
 
 // Sample spacing of a chunk's input points (points sampled on large triangles left out).
@@ -462,10 +485,14 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   out.areaSpacing = std::max(spacing.area, sp);
   out.weight = pts.size();
   ChunkTicker ticker(progress, "octree", before, pts.size(), total, 2);
-  if (!job.triangles) out.outliers = fitChunkSurface(job, pts, pos, nrm, spacing, ticker);
+  std::vector<uint32_t> idx;
+  if (!job.triangles) {
+    idx = fitChunkSurface(job, pts, pos, nrm, spacing, ticker, out.outliers);
+  } else {
+    idx.resize(pts.size());
+    for (uint32_t i = 0; i < idx.size(); ++i) idx[i] = i;
+  }
   const size_t n = pts.size();
-  std::vector<uint32_t> idx(n);
-  for (uint32_t i = 0; i < n; ++i) idx[i] = i;
   Eigen::Vector3d cmin;
   double csize;
   nodeCube(job.qz, ch.level, ch.ix, ch.iy, ch.iz, cmin, csize);
