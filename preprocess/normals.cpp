@@ -200,8 +200,9 @@ struct OrderedPoints {
   const uint32_t* orig;
   float* nrm;     // the caller's normals
   uint8_t* keep;  // the caller's flags
-  float* normal(size_t i) const { return nrm + 3 * size_t(orig[i]); }
-  bool kept(size_t i) const { return keep[orig[i]] != 0; }
+  size_t at(size_t i) const { return orig ? orig[i] : i; }  // no orig: the caller's arrays are in the grid's order
+  float* normal(size_t i) const { return nrm + 3 * at(i); }
+  bool kept(size_t i) const { return keep[at(i)] != 0; }
 };
 
 size_t propagateOrientation(const NeighbourLists& weakLists, size_t n, const OrderedPoints& pts) {
@@ -288,7 +289,7 @@ void markOutliers(const GridKnn& grid, const std::vector<float>& density, const 
       if (ind[j] >= 0) around.push_back(density[size_t(ind[j])]);
     if (around.empty()) return;
     std::nth_element(around.begin(), around.begin() + long(around.size() / 2), around.end());
-    if (density[i] > ratio * around[around.size() / 2]) pts.keep[pts.orig[i]] = 0;
+    if (density[i] > ratio * around[around.size() / 2]) pts.keep[pts.at(i)] = 0;
   };
   const std::vector<std::pair<uint32_t, const int*>> recs = listed.sorted();
   tbb::parallel_for(tbb::blocked_range<size_t>(0, recs.size(), 1 << 10), [&](const tbb::blocked_range<size_t>& r) {
@@ -336,7 +337,7 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
   grid.forEach(outliers ? std::max(k, kd) : fit ? k : kd, [&](size_t i, const int* in, const double* dist, int mq) {
     tick(2);
     const Eigen::Vector3d p(&src[3 * i]);
-    const size_t o = pts.orig[i];
+    const size_t o = pts.at(i);
     if (localSpacing) {
       const int j = std::min(mq - 1, kDensityNeighbours);  // [0] is the point itself
       localSpacing[o] = float(std::sqrt(dist[j] * M_PI / std::max(j, 1)));
@@ -379,6 +380,17 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
   return size_t(std::count(pts.keep, pts.keep + n, 0));
 }
 
+// v's records of `width` values laid out in `order` (the record now at i was at order[i]), in
+// v's own memory (the caller's pointer).
+template <class T>
+void permuteInPlace(T* v, size_t width, const std::vector<uint32_t>& order) {
+  const size_t n = order.size();
+  std::vector<T> copy(v, v + width * n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) std::copy_n(&copy[width * size_t(order[i])], width, &v[width * i]);
+  });
+}
+
 }  // namespace
 
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
@@ -398,7 +410,23 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   std::vector<uint32_t> orig;
   std::vector<double> src;
   const GridKnn grid = GridKnn(pos, n, GridKnn::cellFor(spacing, k)).inOrder(src, orig);
-  const size_t removed = fitOrdered(grid, {src.data(), orig.data(), nrm, keep.data()}, n, k, orient, opt, pos, localSpacing);
+  NormalOrientation laidOrient;
+  std::vector<uint16_t> scans;
+  const bool laid = opt.layOut && order;
+  if (laid) {
+    std::copy(src.begin(), src.end(), pos);
+    permuteInPlace(nrm, 3, orig);
+    laidOrient = orient;
+    if (orient.scan) {
+      scans.resize(n);
+      for (size_t i = 0; i < n; ++i)
+        scans[i] = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + orig[i] * orient.scanStride);
+      laidOrient.scan = scans.data();
+      laidOrient.scanStride = sizeof(uint16_t);
+    }
+  }
+  const size_t removed = fitOrdered(grid, {src.data(), laid ? nullptr : orig.data(), nrm, keep.data()}, n, k,
+                                    laid ? laidOrient : orient, opt, pos, localSpacing);
   if (order) *order = std::move(orig);
   return removed;
 }

@@ -35,6 +35,11 @@ struct SurfaceOptions {
   // The points' spacing when the caller has it (estimateSpacing(pos, n): its area spacing, else
   // its nearest), which sizes the neighbour grid; 0: estimated here.
   double spacing = 0;
+  // Lay the points out in the neighbour grid's order (by cell, the cells in Morton order)
+  // before the fit, so that it reads and writes nearby memory: pos and nrm are permuted in place
+  // (the point now at i was at (*order)[i], fitSurface's order must be given), and keep and
+  // localSpacing come in that order. The caller permutes its other per-point arrays.
+  bool layOut = false;
   // Progress of long fits, called now and then from any thread with the units done since the
   // last call; the whole fit is 2 units a point. May be empty.
   std::function<void(size_t)> progress;
@@ -49,8 +54,7 @@ struct SurfaceOptions {
 // An outlier's position and normal are left as the fit made them (callers drop outliers).
 // Returns the number of outliers.
 // localSpacing (may be null): per point, the side of its area, r_8 sqrt(pi / 8) (Spacing::area).
-// order (may be null): the points in the neighbour grid's order (by cell, the cells in Morton
-// order), for callers that lay their arrays out in space.
+// order (may be null): the points in the neighbour grid's order (SurfaceOptions::layOut).
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
                   std::vector<uint8_t>& keep, float* localSpacing = nullptr, std::vector<uint32_t>* order = nullptr);
 

@@ -237,42 +237,42 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
   }
 }
 
-// pts, pos and nrm without the outliers and laid out in the fit's grid order (space-filling):
-// kept point i of the file's order (i counting kept points only) is now at place[i]. The octree
-// and the chunk's rewrite, which visit the points by cell, then read nearby memory; the
-// octree's index array holds the places in that order, so it splits the points exactly as it
-// did over the file's order and its sums add the same numbers in the same order.
-std::vector<uint32_t> layOut(std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
-                             const std::vector<uint8_t>& keep, const std::vector<uint32_t>& order) {
+// The fit's output laid out in its grid order (pos, nrm, keep: the point at i was at order[i] in
+// the file's order, where pts still is): pts laid out too, the outliers (keep 0) dropped from all
+// three. Returns where each kept point now is, in the file's order of the kept points: the
+// octree's first index array. The octree then splits the points exactly as it did over the
+// file's order, and its sums add the same numbers in the same order, while it and the chunk's
+// rewrite, which visit the points by cell, read nearby memory.
+std::vector<uint32_t> layOutKept(std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
+                                 const std::vector<uint8_t>& keep, const std::vector<uint32_t>& order) {
   const size_t n = pts.size();
-  std::vector<uint32_t> rank(n), place;  // rank: a kept point's index among the kept
-  uint32_t m = 0;
-  for (size_t i = 0; i < n; ++i) rank[i] = keep[i] ? m++ : UINT32_MAX;
-  std::vector<uint32_t> from;  // from[j]: the old index of the point now at j
-  from.reserve(m);
-  place.resize(m);
-  for (uint32_t o : order)
-    if (keep[o]) {
-      place[rank[o]] = uint32_t(from.size());
-      from.push_back(o);
+  std::vector<uint32_t> rank(n);  // a kept point's index among the kept, in the file's order
+  std::vector<uint8_t> kept(n);
+  for (size_t i = 0; i < n; ++i) kept[order[i]] = keep[i];
+  uint32_t r = 0;
+  for (size_t o = 0; o < n; ++o) rank[o] = kept[o] ? r++ : 0;
+  std::vector<uint32_t> place(r);
+  std::vector<ChunkPoint> laid;
+  laid.reserve(r);
+  for (size_t i = 0; i < n; ++i) {
+    if (!keep[i]) continue;
+    const uint32_t m = uint32_t(laid.size());
+    place[rank[order[i]]] = m;
+    laid.push_back(pts[order[i]]);
+    if (m != i) {
+      std::copy_n(&pos[3 * i], 3, &pos[3 * size_t(m)]);
+      std::copy_n(&nrm[3 * i], 3, &nrm[3 * size_t(m)]);
     }
-  auto permute = [&](auto& v, size_t width) {
-    std::remove_reference_t<decltype(v)> out(width * m);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t j = r.begin(); j != r.end(); ++j)
-        std::copy_n(&v[width * size_t(from[j])], width, &out[width * j]);
-    });
-    v = std::move(out);
-  };
-  permute(pts, 1);
-  permute(pos, 3);
-  permute(nrm, 3);
+  }
+  pts = std::move(laid);
+  pos.resize(3 * size_t(r));
+  nrm.resize(3 * size_t(r));
   return place;
 }
 
-// Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h).
-// Drops the outliers from pts, pos and nrm and lays them out in space (layOut): returns where
-// each kept point went, the octree's first index array.
+// Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h),
+// pts, pos and nrm laid out in the fit's grid order (SurfaceOptions::layOut) and the outliers
+// dropped from them: returns where each kept point went (layOutKept).
 std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos,
                                       std::vector<float>& nrm, const Spacing& spacing, ChunkTicker& ticker,
                                       uint64_t& removed) {
@@ -293,10 +293,11 @@ std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint
   std::vector<uint8_t> keep;
   std::vector<float> local(pts.size(), 0.f);
   std::vector<uint32_t> order;
+  so.layOut = true;
   removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data(), &order);
   for (size_t i = 0; i < pts.size(); ++i)
-    pts[i].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
-  return layOut(pts, pos, nrm, keep, order);
+    pts[order[i]].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
+  return layOutKept(pts, pos, nrm, keep, order);
 }
 
 // Sample spacing of a chunk's input points (points sampled on large triangles left out).
