@@ -297,6 +297,42 @@ TEST(GridKnn, GivenNormalsUnsmoothedKeepTheOutliersAndSpacings) {
   EXPECT_NE(nFit, given) << "the fitting pass estimates normals";
 }
 
+// Laid out in the grid's order (SurfaceOptions::layOut), the fit gives each point what it gives
+// it in the caller's order: the same outlier flag, smoothed position, normal (signed by its
+// scan's direction) and spacing, at the point's new place.
+TEST(GridKnn, FitLaidOutInGridOrderGivesEachPointTheSameResults) {
+  const std::vector<double> pos = outlierCloud();
+  const size_t n = pos.size() / 3;
+  std::vector<uint16_t> scan(n);
+  for (size_t i = 0; i < n; ++i) scan[i] = uint16_t(i % 3);
+  NormalOrientation orient;
+  orient.towardScanner = {Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, -1), Eigen::Vector3d(1, 0, 1)};
+  orient.scan = scan.data();
+  orient.scanStride = sizeof(uint16_t);
+  SurfaceOptions so;
+  std::vector<double> p0 = pos, p1 = pos;
+  std::vector<float> n0(3 * n, 0.f), n1(3 * n, 0.f), s0(n), s1(n);
+  std::vector<uint8_t> k0, k1;
+  std::vector<uint32_t> order;
+  const size_t r0 = fitSurface(p0.data(), n, orient, so, n0.data(), k0, s0.data());
+  so.layOut = true;
+  const size_t r1 = fitSurface(p1.data(), n, orient, so, n1.data(), k1, s1.data(), &order);
+  EXPECT_EQ(r1, r0);
+  ASSERT_EQ(order.size(), n);
+  size_t moved = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const size_t o = order[i];
+    moved += o != i;
+    ASSERT_EQ(k1[i], k0[o]) << "point " << o;
+    ASSERT_EQ(s1[i], s0[o]) << "point " << o;
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_EQ(p1[3 * i + a], p0[3 * o + a]) << "point " << o;
+      ASSERT_EQ(n1[3 * i + a], n0[3 * o + a]) << "point " << o;
+    }
+  }
+  EXPECT_GT(moved, n / 2) << "the cloud's order is not the grid's";
+}
+
 struct Collect : BatchSink {
   std::vector<double> xyz;
   Status onPoints(const PointBatch& b) override {
