@@ -84,6 +84,26 @@ std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, int level, size
   return out;
 }
 
+// One texel's tb bytes copied, zeroed, compared: the layouts' texels are 2 or 4 bytes (masks 1), which
+// the compiler then moves in one instruction where a memcpy call of a run-time size cost more
+// than the copy.
+inline void copyTexel(uint8_t* d, const uint8_t* s, size_t tb) {
+  if (tb == 4) std::memcpy(d, s, 4);
+  else if (tb == 2) std::memcpy(d, s, 2);
+  else if (tb == 1) *d = *s;
+  else std::memcpy(d, s, tb);
+}
+inline void zeroTexel(uint8_t* d, size_t tb) {
+  if (tb == 4) std::memset(d, 0, 4);
+  else if (tb == 2) std::memset(d, 0, 2);
+  else std::memset(d, 0, tb);
+}
+inline bool sameTexel(const uint8_t* a, const uint8_t* b, size_t tb) {
+  if (tb == 4) return std::memcmp(a, b, 4) == 0;
+  if (tb == 2) return std::memcmp(a, b, 2) == 0;
+  return std::memcmp(a, b, tb) == 0;
+}
+
 // A pyramid blob: this tag, then one zstd frame (FORMAT.md, "Compressed pages").
 constexpr uint8_t kPyramidTag[4] = {'P', 'Y', 'R', '1'};
 
@@ -99,7 +119,7 @@ std::vector<uint8_t> interiorOf(const uint8_t* page, uint32_t pageWidth, TileReg
       if (i && j && i <= iw && j <= ih) continue;
       const uint32_t ci = std::clamp<uint32_t>(i, 1, iw) - 1, cj = std::clamp<uint32_t>(j, 1, ih) - 1;
       const uint8_t* p = page + ((size_t(r.y) + j) * pageWidth + r.x + i) * tb;
-      if (std::memcmp(in.data() + (size_t(cj) * iw + ci) * tb, p, tb) != 0) return {};
+      if (!sameTexel(in.data() + (size_t(cj) * iw + ci) * tb, p, tb)) return {};
     }
   return in;
 }
@@ -122,12 +142,12 @@ std::vector<Level> levelsOf(uint32_t w, uint32_t h) {
 void gather(const uint8_t* t, uint32_t w, Level L, size_t tb, uint8_t* g) {
   for (uint32_t j = 0; j < L.h; ++j)
     for (uint32_t i = 0; i < L.w; ++i)
-      std::memcpy(g + (size_t(j) * L.w + i) * tb, t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, tb);
+      copyTexel(g + (size_t(j) * L.w + i) * tb, t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, tb);
 }
 void scatter(const uint8_t* g, Level L, uint32_t w, size_t tb, uint8_t* t) {
   for (uint32_t j = 0; j < L.h; ++j)
     for (uint32_t i = 0; i < L.w; ++i)
-      std::memcpy(t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, g + (size_t(j) * L.w + i) * tb, tb);
+      copyTexel(t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, g + (size_t(j) * L.w + i) * tb, tb);
 }
 
 // One level as a tight grid: its values, its coverage and its rebuild from the level above
@@ -278,7 +298,7 @@ Status decodePyramid(std::span<const uint8_t> blob, uint8_t* page, uint32_t page
   for (uint32_t j = 0; j < r.h; ++j)
     for (uint32_t i = 0; i < r.w; ++i) {
       const uint32_t ci = std::clamp<uint32_t>(i, 1, iw) - 1, cj = std::clamp<uint32_t>(j, 1, ih) - 1;
-      std::memcpy(page + ((size_t(r.y) + j) * pageWidth + r.x + i) * tb, in.data() + (size_t(cj) * iw + ci) * tb, tb);
+      copyTexel(page + ((size_t(r.y) + j) * pageWidth + r.x + i) * tb, in.data() + (size_t(cj) * iw + ci) * tb, tb);
     }
   return Status::ok();
 }
@@ -302,11 +322,11 @@ void upsampleEven(const uint8_t* src, const uint8_t* covered, uint32_t w, uint32
       const size_t k = size_t(j) * w + i;
       uint8_t* d = dst + k * tb;
       if (!(i & 1) && !(j & 1)) {
-        std::memcpy(d, src + k * tb, tb);
+        copyTexel(d, src + k * tb, tb);
         continue;
       }
       if (!covered[k]) {
-        std::memset(d, 0, tb);
+        zeroTexel(d, tb);
         continue;
       }
       uint32_t sum[4] = {0, 0, 0, 0}, count = 0;
@@ -341,9 +361,9 @@ size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32
       for (uint32_t i = 0; i < L.w; ++i) {
         const size_t k = size_t(j) * L.w + i;
         const uint8_t *a = &g.values[k * tb], *b = &g.rebuilt[k * tb];
-        if ((!(i & 1) && !(j & 1)) || !g.cov[k] || std::memcmp(a, b, tb) == 0) continue;
+        if ((!(i & 1) && !(j & 1)) || !g.cov[k] || sameTexel(a, b, tb)) continue;
         if (std::all_of(b, b + tb, [](uint8_t x) { return x == 0; }) || !close(a, b)) continue;
-        std::memcpy(texels + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, b, tb);
+        copyTexel(texels + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, b, tb);
         ++snapped;
       }
   }
