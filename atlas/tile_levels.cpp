@@ -81,9 +81,14 @@ void coverMasks(const TileImage& s, TileImage& t) {
     for (uint32_t r = 0; r < 8; ++r) {
       const uint32_t fj = sv.texel[8 * j + r], bit = 4u * sv.sub[8 * j + r];
       uint8_t* row = &rows[size_t(r) * 8 * t.w];
-      for (uint32_t k = 0; k < 8 * t.w; ++k) {
-        const size_t f = at(s, int(su.texel[k]), int(fj));
-        row[k] = s.heights[f] != 0 && (s.cover.empty() || ((s.cover[f] >> (bit + su.sub[k])) & 1u));
+      const size_t base = at(s, 0, int(fj));  // the row's first texel
+      const uint16_t* hr = &s.heights[base];
+      if (s.cover.empty()) {  // level 0: a texel is covered whole or not at all
+        for (uint32_t k = 0; k < 8 * t.w; ++k) row[k] = hr[su.texel[k]] != 0;
+      } else {
+        const uint16_t* cr = &s.cover[base];
+        for (uint32_t k = 0; k < 8 * t.w; ++k)
+          row[k] = uint8_t((hr[su.texel[k]] != 0) & ((cr[su.texel[k]] >> (bit + su.sub[k])) & 1u));
       }
     }
     for (uint32_t i = 0; i < t.w; ++i) {
