@@ -84,9 +84,8 @@ std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, int level, size
   return out;
 }
 
-// One texel's tb bytes copied, zeroed, compared: the layouts' texels are 2 or 4 bytes (masks 1), which
-// the compiler then moves in one instruction where a memcpy call of a run-time size cost more
-// than the copy.
+// One texel's tb bytes copied, zeroed, compared. Texels are 2 or 4 bytes (coverage masks 1), and
+// a size known here is one move; a memcpy call of a run-time size cost more than the copy.
 inline void copyTexel(uint8_t* d, const uint8_t* s, size_t tb) {
   if (tb == 4) std::memcpy(d, s, 4);
   else if (tb == 2) std::memcpy(d, s, 2);
@@ -249,10 +248,10 @@ std::vector<uint8_t> pyramidBlob(const std::vector<uint8_t>& payload, int level)
   return out;
 }
 
-// Bytes at zstd's fastest level: which of two payloads codes smaller at the pack's level agrees
-// with it on all but about 2 % of the normal and colour tiles of the real scans and the survey,
-// which then cost 0.04 % more bytes of those pages (docs/BENCHMARKS.md). Coding both at the pack's
-// level cost 8 % of a pack's time.
+// Bytes at zstd's fastest level. Which of two payloads codes smaller there agrees with the
+// pack's level on all but 1.3 % of the normal and colour tiles of the real scans and the survey;
+// a pack's normal and colour bytes grew by at most 0.043 % (docs/BENCHMARKS.md). Coding both
+// forms at the pack's level took about 4 % more of a pack's CPU.
 size_t quickSize(const std::vector<uint8_t>& bytes) {
   thread_local std::vector<uint8_t> scratch;
   scratch.resize(ZSTD_compressBound(bytes.size()));

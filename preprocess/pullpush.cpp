@@ -37,9 +37,9 @@ struct Quadric {
     return b;
   }
   double operator()(double u, double v) const { return c.dot(basis(u, v)); }
-  // Its value at every texel centre of g, row by row: (*this)(u, v) to the bit, with the
-  // coordinates' divisions once a column and a row instead of once a texel, and the dot
-  // product's terms summed as Eigen's two-lane dot above sums them.
+  // Its value at every texel centre of g, row by row, with the coordinates' divisions once a
+  // column and a row instead of once a texel. The terms are summed in the order the Release
+  // build's two-lane Eigen dot above sums them, so the packs kept their bytes.
   std::vector<double> atTexels(const TileGrid& g) const {
     const int W = g.width, H = g.height;
     std::vector<double> xs(size_t(W), 0.0), out(size_t(W) * H);
@@ -232,8 +232,7 @@ Level makeLevel(int w, int h, int channels) {
 // follows their slope instead of bending toward the tile's trend.
 void splat(const TileGrid& g, const TileSamples& s, const std::vector<double>& trendAt, double radius, const Channels& ch,
            Level& L) {
-  const int W = g.width, C = ch.count;
-  const int H = g.height;
+  const int W = g.width, H = g.height, C = ch.count;
   double gu = 0, gv = 0;  // the current sample's slope
   auto add = [&](size_t i, int x, int y, double wt) {
     const size_t t = size_t(y) * W + x;
