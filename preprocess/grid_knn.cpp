@@ -169,28 +169,38 @@ bool GridKnn::select(const double* p, Candidates& from, int k, double b2,
     for (size_t j = 0; j < nc; ++j) far = std::max(far, d2[j]);
     b2 = far;
   }
+  // The candidates within b2, in one branch-free pass (on a surface a tight bound keeps about
+  // half of the block); the histogram then reads only those.
+  from.near.resize(nc);
+  uint32_t* near = from.near.data();
+  size_t nn = 0;
+  for (size_t j = 0; j < nc; ++j) {
+    near[nn] = uint32_t(j);
+    nn += d2[j] <= b2;
+  }
+  if (nn < m) return false;  // fewer than m within b2
   constexpr int kBuckets = 32;
   const double scale = b2 > 0 ? kBuckets / b2 : 0;
-  // Bucket of each candidate (kBuckets: beyond b2, never taken; one just past b2 may land in the
-  // last bucket, which keeps the answer exact: only the buckets' order matters).
-  from.bucket.resize(nc);
+  // Bucket of each (d2 <= b2: one at b2 itself, or a product rounded up to kBuckets, goes in
+  // the last, which keeps the answer exact: only the buckets' order matters).
+  from.bucket.resize(nn);
   uint16_t* bk = from.bucket.data();
-  uint32_t count[kBuckets + 1] = {};
-  for (size_t j = 0; j < nc; ++j) {
-    const double f = d2[j] * scale;
-    const int b = f < kBuckets ? int(f) : (d2[j] <= b2 ? kBuckets - 1 : kBuckets);
-    bk[j] = uint16_t(b);
+  uint32_t count[kBuckets] = {};
+  for (size_t a = 0; a < nn; ++a) {
+    const double f = d2[near[a]] * scale;
+    const int b = f < kBuckets ? int(f) : kBuckets - 1;  // NaN (0 times an infinite scale): the last
+    bk[a] = uint16_t(b);
     ++count[b];
   }
   int last = 0;  // the bucket the m-th lies in
-  for (size_t sum = 0; last < kBuckets; ++last)
+  for (size_t sum = 0; last < kBuckets - 1; ++last)
     if ((sum += count[last]) >= m) break;
-  if (last == kBuckets) return false;  // fewer than m within b2
-  best.resize(nc);
+  best.resize(nn);
   size_t kept = 0;
-  for (size_t j = 0; j < nc; ++j) {  // branch-free: every candidate written, the kept ones advance
+  for (size_t a = 0; a < nn; ++a) {  // branch-free: every candidate written, the kept ones advance
+    const uint32_t j = near[a];
     best[kept] = {d2[j], from.index[j]};
-    kept += bk[j] <= last;
+    kept += bk[a] <= last;
   }
   best.resize(kept);
   if (m < best.size()) std::nth_element(best.begin(), best.begin() + long(m - 1), best.end());

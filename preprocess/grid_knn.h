@@ -83,7 +83,8 @@ class GridKnn {
     std::vector<uint32_t> index;
     std::vector<double> x, y, z;  // their positions, one array per axis (the distances vectorize)
     std::vector<double> d2;       // scratch: their squared distances to the point asked about
-    std::vector<uint16_t> bucket; // scratch: the distances' histogram buckets
+    std::vector<uint32_t> near;   // scratch: the candidates within the bound
+    std::vector<uint16_t> bucket; // scratch: their histogram buckets
   };
   // visit(cell) for every non-empty cell of the block [a, b] (cell coordinates, inclusive).
   template <class F>
