@@ -305,35 +305,52 @@ Level pull(const Level& f, int C) {
   return c;
 }
 
-// Push: fill a level's weak texels from the coarser level (bilinear).
+// Push: fill a level's weak texels from the coarser level (bilinear). A texel's coarse
+// neighbours and weights depend on its column and row alone: computed once per column and row.
 void push(Level& f, const Level& c, int C) {
-  std::vector<double> acc(static_cast<size_t>(C));
-  for (int y = 0; y < f.h; ++y)
+  struct Tap {
+    int i0, i1;  // the two coarse columns (rows)
+    double a;    // the weight of the second
+  };
+  auto taps = [](int fine, int coarse) {
+    std::vector<Tap> t(static_cast<size_t>(fine));
+    for (int x = 0; x < fine; ++x) {
+      // Position of this texel centre in the coarse grid.
+      const double cx = std::clamp((x + 0.5) / 2.0 - 0.5, 0.0, double(coarse - 1));
+      const int x0 = static_cast<int>(cx);
+      t[size_t(x)] = {x0, std::min(x0 + 1, coarse - 1), cx - x0};
+    }
+    return t;
+  };
+  const std::vector<Tap> tx = taps(f.w, c.w), ty = taps(f.h, c.h);
+  double acc[8];  // C <= 6: colour and normal
+  for (int y = 0; y < f.h; ++y) {
+    const Tap& yt = ty[size_t(y)];
+    const int ys[2] = {yt.i0, yt.i1};
+    const double ay = yt.a;
     for (int x = 0; x < f.w; ++x) {
       const size_t ft = size_t(y) * f.w + x;
       const float wt = f.weight[ft];
       if (wt >= 1.f) continue;
-      // Position of this texel centre in the coarse grid.
-      const double cx = std::clamp((x + 0.5) / 2.0 - 0.5, 0.0, double(c.w - 1));
-      const double cy = std::clamp((y + 0.5) / 2.0 - 0.5, 0.0, double(c.h - 1));
-      const int x0 = static_cast<int>(cx), y0 = static_cast<int>(cy);
-      const int xs[2] = {x0, std::min(x0 + 1, c.w - 1)}, ys[2] = {y0, std::min(y0 + 1, c.h - 1)};
-      const double ax = cx - x0, ay = cy - y0;
+      const Tap& xt = tx[size_t(x)];
+      const int xs[2] = {xt.i0, xt.i1};
+      const double ax = xt.a;
       double val = 0, ws = 0;
-      std::fill(acc.begin(), acc.end(), 0.0);
+      std::fill(acc, acc + C, 0.0);
       for (int j = 0; j < 2; ++j)
         for (int i = 0; i < 2; ++i) {
           const size_t ct = size_t(ys[j]) * c.w + xs[i];
           const double bw = (i ? ax : 1 - ax) * (j ? ay : 1 - ay) * c.weight[ct];
           ws += bw;
           val += bw * c.value[ct];
-          for (int k = 0; k < C; ++k) acc[size_t(k)] += bw * c.attr[ct * C + k];
+          for (int k = 0; k < C; ++k) acc[k] += bw * c.attr[ct * C + k];
         }
       if (ws <= 0) continue;
       f.value[ft] = wt * f.value[ft] + (1 - wt) * val / ws;
-      for (int k = 0; k < C; ++k) f.attr[ft * C + k] = float(wt * f.attr[ft * C + k] + (1 - wt) * acc[size_t(k)] / ws);
+      for (int k = 0; k < C; ++k) f.attr[ft * C + k] = float(wt * f.attr[ft * C + k] + (1 - wt) * acc[k] / ws);
       f.weight[ft] = 1.f;
     }
+  }
 }
 
 }  // namespace
