@@ -80,11 +80,11 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
   size_t size = 16;
   while (size < 2 * cells_.size()) size *= 2;
   mask_ = size - 1;
-  table_.assign(size, -1);
+  table_.assign(size, Slot{0, -1});
   for (size_t c = 0; c < cells_.size(); ++c) {
     uint64_t h = (hashKey(cells_[c].key) >> 20) & mask_;
-    while (table_[h] >= 0) h = (h + 1) & mask_;
-    table_[h] = int64_t(c);
+    while (table_[h].cell >= 0) h = (h + 1) & mask_;
+    table_[h] = {cells_[c].key, int64_t(c)};
   }
 }
 
@@ -113,8 +113,8 @@ void GridKnn::coords(size_t i, int64_t c[3]) const {
 
 int64_t GridKnn::findCell(uint64_t key) const {
   uint64_t h = (hashKey(key) >> 20) & mask_;
-  while (table_[h] >= 0) {
-    if (cells_[size_t(table_[h])].key == key) return table_[h];
+  while (table_[h].cell >= 0) {
+    if (table_[h].key == key) return table_[h].cell;
     h = (h + 1) & mask_;
   }
   return -1;

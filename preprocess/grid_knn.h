@@ -107,7 +107,11 @@ class GridKnn {
   std::vector<double> sorted_;   // their positions in that order
   const double* sortedPos_;      // sorted_, or pos_ where the points are in the grid's order
   std::vector<Cell> cells_;
-  std::vector<int64_t> table_;  // open addressing: cell index or -1
+  struct Slot {
+    uint64_t key;  // the cell's key beside its index: a probe reads one line, not two
+    int64_t cell;  // index into cells_, or -1
+  };
+  std::vector<Slot> table_;  // open addressing
   uint64_t mask_ = 0;
 };
 
