@@ -195,17 +195,28 @@ bool GridKnn::select(const double* p, Candidates& from, int k, double b2,
   int last = 0;  // the bucket the m-th lies in
   for (size_t sum = 0; last < kBuckets - 1; ++last)
     if ((sum += count[last]) >= m) break;
-  best.resize(nn);
-  size_t kept = 0;
+  // The candidates up to that bucket, placed by bucket (a counting sort; one slot past them takes
+  // the rest), so that only the last bucket is selected from and the whole is nearly in order.
+  uint32_t end[kBuckets];
+  for (int b = 0, at = 0; b < kBuckets; ++b) end[b] = uint32_t(at), at += b <= last ? int(count[b]) : 0;
+  const uint32_t kept = end[last] + count[last];
+  best.resize(kept + 1);
   for (size_t a = 0; a < nn; ++a) {  // branch-free: every candidate written, the kept ones advance
-    const uint32_t j = near[a];
-    best[kept] = {d2[j], from.index[j]};
-    kept += bk[a] <= last;
+    const uint32_t j = near[a], b = bk[a], in = b <= uint32_t(last);
+    best[in ? end[b] : kept] = {d2[j], from.index[j]};
+    end[b] += in;
   }
+  const auto first = best.begin() + (end[last] - count[last]);
   best.resize(kept);
-  if (m < best.size()) std::nth_element(best.begin(), best.begin() + long(m - 1), best.end());
+  if (m < kept) std::nth_element(first, best.begin() + long(m - 1), best.end());
   best.resize(m);
-  std::sort(best.begin(), best.end());
+  // Insertion sort: the buckets are in order, each holds a candidate or two on a surface.
+  for (size_t a = 1; a < m; ++a) {
+    const std::pair<double, uint32_t> e = best[a];
+    size_t b = a;
+    for (; b > 0 && e < best[b - 1]; --b) best[b] = best[b - 1];
+    best[b] = e;
+  }
   return true;
 }
 
