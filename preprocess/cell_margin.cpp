@@ -60,21 +60,27 @@ void MarginFinder::normalField(const double* xyz, const float* hints, size_t m, 
   std::vector<std::pair<double, uint32_t>> near;
   for (size_t i = 0; i < m; ++i) {
     index_->grid.within(&xyz[3 * i], radius, near);
-    fieldAt(near, r2, &hints[3 * i], &out[3 * i]);
+    fieldAt(near.data(), near.size(), r2, &hints[3 * i], &out[3 * i]);
   }
 }
 
-void MarginFinder::fieldAt(const std::vector<std::pair<double, uint32_t>>& near, double r2, const float* hintF,
+void MarginFinder::fieldAt(const std::pair<double, uint32_t>* near, size_t count, double r2, const float* hintF,
                            float* out) const {
   const Eigen::Vector3d hint(hintF[0], hintF[1], hintF[2]);
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  for (const auto& [d2, j] : near) {
+  // The sum in scalars, each component as Eigen's q * q * nn added it (an Eigen vector sum went
+  // through the stack).
+  double sx = 0, sy = 0, sz = 0;
+  for (size_t a = 0; a < count; ++a) {
+    const auto& [d2, j] = near[a];
     const float* n = &nrm_[3 * size_t(j)];
     const Eigen::Vector3d nn(n[0], n[1], n[2]);
     if (!(nn.dot(hint) > 0.5)) continue;
     const double q = 1 - d2 / r2;
-    if (q > 0) sum += q * q * nn;
+    if (!(q > 0)) continue;
+    const double w = q * q;
+    sx += w * nn.x(), sy += w * nn.y(), sz += w * nn.z();
   }
+  Eigen::Vector3d sum(sx, sy, sz);
   if (sum.norm() > 0) {
     sum.normalize();
     for (int a = 0; a < 3; ++a) out[a] = float(sum[a]);
@@ -124,14 +130,16 @@ void MarginFinder::tileField(const double* xyz, const float* hints, size_t m, do
     ++start[size_t(binOf[c]) + 1];
   }
   for (size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
-  // Each bin's points and their positions side by side (a texel reads them in turn).
+  // Each bin's points and their positions side by side, one array per axis (a texel reads a
+  // row of bins in turn, its distances in one loop the compiler vectorizes).
   std::vector<uint32_t> binned(start.back()), fill(start.begin(), start.end() - 1);
-  std::vector<double> at(3 * binned.size());
+  std::vector<double> ax(binned.size()), ay(binned.size()), az(binned.size());
   for (size_t c = 0; c < cand.size(); ++c)
     if (binOf[c] >= 0) {
       const uint32_t slot = fill[size_t(binOf[c])]++;
       binned[slot] = cand[c];
-      std::copy(&pos_[3 * size_t(cand[c])], &pos_[3 * size_t(cand[c])] + 3, &at[3 * size_t(slot)]);
+      const double* p = &pos_[3 * size_t(cand[c])];
+      ax[slot] = p[0], ay[slot] = p[1], az[slot] = p[2];
     }
   // A texel reads the bins its centre's square of side 2 radius meets (a hundredth of a bin of
   // slack for rounding).
@@ -139,23 +147,28 @@ void MarginFinder::tileField(const double* xyz, const float* hints, size_t m, do
     b0 = std::max<int64_t>(0, int64_t(std::floor((c - r) / s - 0.01)) + pad);
     b1 = std::min<int64_t>(n - 1, int64_t(std::floor((c + r) / s + 0.01)) + pad);
   };
-  std::vector<std::pair<double, uint32_t>> near;
+  std::vector<double> d2(binned.size());
+  std::vector<std::pair<double, uint32_t>> near(binned.size() + 1);
   for (size_t k = 0; k < m; ++k) {
     const size_t ti = tile.texel[k] % size_t(tile.width), tj = tile.texel[k] / size_t(tile.width);
     int64_t u0, u1, v0, v1;
     range((double(ti) + 0.5) * tile.du, su, Pu, BW, radius, u0, u1);
     range((double(tj) + 0.5) * tile.dv, sv, Pv, BH, radius, v0, v1);
-    const double* q = &xyz[3 * k];
-    near.clear();
-    for (int64_t bj = v0; bj <= v1; ++bj)
-      for (uint32_t a = start[size_t(bj * BW + u0)]; a < start[size_t(bj * BW + u1) + 1]; ++a) {
-        const double* p = &at[3 * size_t(a)];
-        const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-        const double d2 = dx * dx + dy * dy + dz * dz;
-        if (d2 <= r2) near.emplace_back(d2, binned[a]);
+    const double qx = xyz[3 * k], qy = xyz[3 * k + 1], qz = xyz[3 * k + 2];
+    size_t count = 0;
+    for (int64_t bj = v0; bj <= v1; ++bj) {
+      const uint32_t a0 = start[size_t(bj * BW + u0)], a1 = start[size_t(bj * BW + u1) + 1];
+      for (uint32_t a = a0; a < a1; ++a) {
+        const double dx = ax[a] - qx, dy = ay[a] - qy, dz = az[a] - qz;
+        d2[a] = dx * dx + dy * dy + dz * dz;
       }
-    std::sort(near.begin(), near.end());
-    fieldAt(near, r2, &hints[3 * k], &out[3 * k]);
+      for (uint32_t a = a0; a < a1; ++a) {  // branch-free: every one written, those within advance
+        near[count] = {d2[a], binned[a]};
+        count += d2[a] <= r2;
+      }
+    }
+    std::sort(near.begin(), near.begin() + long(count));
+    fieldAt(near.data(), count, r2, &hints[3 * k], &out[3 * k]);
   }
 }
 

@@ -48,7 +48,7 @@ class MarginFinder {
 
  private:
   // One texel's field from the points within its radius, ascending (d2, index).
-  void fieldAt(const std::vector<std::pair<double, uint32_t>>& near, double r2, const float* hint, float* out) const;
+  void fieldAt(const std::pair<double, uint32_t>* near, size_t count, double r2, const float* hint, float* out) const;
   void tileField(const double* xyz, const float* hints, size_t m, double radius, float* out, const TexelFrame& tile) const;
 
   struct Index;
