@@ -25,7 +25,12 @@ PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size
   // Centroid and covariance relative to the first point (no cancellation at large offsets).
   const Eigen::Vector3d ref(&pos[3 * size_t(idx[0])]);
   Eigen::Vector3d sum = Eigen::Vector3d::Zero(), nsum = Eigen::Vector3d::Zero();
+  constexpr size_t kAhead = 16;  // prefetch distance: the points come in the file's order, all over the chunk
   for (size_t i = 0; i < n; ++i) {
+    if (i + kAhead < n) {
+      __builtin_prefetch(&pos[3 * size_t(idx[i + kAhead])]);
+      __builtin_prefetch(&nrm[3 * size_t(idx[i + kAhead])]);
+    }
     sum += Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - ref;
     const float* q = &nrm[3 * size_t(idx[i])];
     nsum += Eigen::Vector3d(q[0], q[1], q[2]);
@@ -34,6 +39,7 @@ PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size
   f.centroid = ref + mean;
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
   for (size_t i = 0; i < n; ++i) {
+    if (i + kAhead < n) __builtin_prefetch(&pos[3 * size_t(idx[i + kAhead])]);
     Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - ref - mean;
     cov += d * d.transpose();
   }
@@ -66,6 +72,7 @@ PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size
   // The height-field test (§3.1.2): every known normal must face the W side of the plane.
   f.minCos = 1;
   for (size_t i = 0; i < n; ++i) {
+    if (i + kAhead < n) __builtin_prefetch(&nrm[3 * size_t(idx[i + kAhead])]);
     const float* q = &nrm[3 * size_t(idx[i])];
     const double len2 = double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2];
     if (!(len2 > 0.25)) continue;
@@ -85,6 +92,7 @@ uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, cons
   // the centroid (a cell spans at most a few million bins per side).
   std::vector<std::pair<uint64_t, double>> e(n);
   for (size_t i = 0; i < n; ++i) {
+    if (i + 16 < n) __builtin_prefetch(&pos[3 * size_t(idx[i + 16])]);  // as fitPlane
     const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - f.centroid;
     const int64_t bu = static_cast<int64_t>(std::floor(d.dot(f.u) / bin)) + (int64_t(1) << 31);
     const int64_t bv = static_cast<int64_t>(std::floor(d.dot(f.v) / bin)) + (int64_t(1) << 31);
