@@ -29,28 +29,44 @@ inline uint32_t predictAt(const uint32_t* cur, const uint32_t* prev, uint32_t i)
 
 uint32_t readValue(const uint8_t* p, int bytes) { return bytes == 2 ? uint32_t(p[0]) | uint32_t(p[1]) << 8 : p[0]; }
 
+// One component's residual planes (lo, hi: its low and high bytes; hi unused for one byte),
+// compiled for its width:
+// the first row and column apart, the rest without a test per texel.
+template <int Bytes>
+void residualComponent(const uint8_t* page, uint32_t pageWidth, TileRegion r, size_t tb, int c, uint32_t* rows,
+                       uint8_t* lo, uint8_t* hi) {
+  constexpr uint32_t mask = Bytes == 2 ? 0xffffu : 0xffu;
+  for (uint32_t j = 0; j < r.h; ++j) {
+    uint32_t* cur = rows + size_t(j & 1) * r.w;
+    const uint32_t* prev = j ? rows + size_t((j - 1) & 1) * r.w : nullptr;
+    const uint8_t* row = page + ((size_t(r.y) + j) * pageWidth + r.x) * tb + size_t(c) * Bytes;
+    for (uint32_t i = 0; i < r.w; ++i) cur[i] = readValue(row + i * tb, Bytes);
+    uint8_t* l = lo + size_t(j) * r.w;
+    uint8_t* h = Bytes == 2 ? hi + size_t(j) * r.w : nullptr;
+    auto put = [&](uint32_t i, uint32_t predicted) {
+      const uint32_t res = (cur[i] - predicted) & mask;
+      l[i] = uint8_t(res);
+      if (Bytes == 2) h[i] = uint8_t(res >> 8);
+    };
+    if (!prev) {
+      for (uint32_t i = 0; i < r.w; ++i) put(i, i ? cur[i - 1] : 0);
+      continue;
+    }
+    if (r.w) put(0, prev[0]);
+    for (uint32_t i = 1; i < r.w; ++i) put(i, predict(cur[i - 1], prev[i], prev[i - 1]));
+  }
+}
+
 // The residual byte planes of region r of `page`: component after component, low bytes first
 // (the high bytes of small residuals are runs of 0x00 and 0xff).
 std::vector<uint8_t> residualPlanes(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
   const size_t n = size_t(r.w) * r.h, tb = size_t(layout.texelBytes());
-  const uint32_t mask = layout.bytes == 2 ? 0xffffu : 0xffu;
   std::vector<uint8_t> planes(n * tb);
   std::vector<uint32_t> rows(2 * size_t(r.w));
   for (int c = 0; c < layout.comps; ++c) {
     uint8_t* lo = planes.data() + size_t(c) * layout.bytes * n;
-    uint8_t* hi = lo + n;
-    for (uint32_t j = 0; j < r.h; ++j) {
-      uint32_t* cur = rows.data() + size_t(j & 1) * r.w;
-      const uint32_t* prev = j ? rows.data() + size_t((j - 1) & 1) * r.w : nullptr;
-      const uint8_t* row = page + ((size_t(r.y) + j) * pageWidth + r.x) * tb + size_t(c) * layout.bytes;
-      for (uint32_t i = 0; i < r.w; ++i) cur[i] = readValue(row + i * tb, layout.bytes);
-      for (uint32_t i = 0; i < r.w; ++i) {
-        const size_t k = size_t(j) * r.w + i;
-        const uint32_t res = (cur[i] - predictAt(cur, prev, i)) & mask;
-        lo[k] = uint8_t(res);
-        if (layout.bytes == 2) hi[k] = uint8_t(res >> 8);
-      }
-    }
+    if (layout.bytes == 2) residualComponent<2>(page, pageWidth, r, tb, c, rows.data(), lo, lo + n);
+    else residualComponent<1>(page, pageWidth, r, tb, c, rows.data(), lo, nullptr);
   }
   return planes;
 }

@@ -106,19 +106,20 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   // Quadric z = c0 + c1 x + c2 y + c3 x^2 + c4 xy + c5 y^2 in (u, v, n) about the weighted
   // centroid, coordinates scaled by h (conditioning).
   const double h = ls.radius;
-  std::array<Eigen::Vector3d, 64> xyz;  // (x, y, z) in that frame
+  alignas(16) double xyz[3 * 64];  // (x, y, z) in that frame, per neighbour
   // A += w f f^T and b += w f z in plain row-major arrays: each entry is its own sum, so the
   // compiler codes a row's six in vector lanes (Eigen's column-major A(r, q) stayed scalar). The
   // lower triangle is what the solve reads; each of its entries is summed exactly as before.
   alignas(16) double a[6][6] = {}, bb[6] = {};
-  for (int j = 0; j < cnt; ++j) xyz[size_t(j)] = {d[size_t(j)].dot(u), d[size_t(j)].dot(v), d[size_t(j)].dot(n)};
+  for (int j = 0; j < cnt; ++j) {
+    const Eigen::Vector3d& dj = d[size_t(j)];
+    xyz[3 * j] = dj.dot(u), xyz[3 * j + 1] = dj.dot(v), xyz[3 * j + 2] = dj.dot(n);
+  }
   // The divisions by h in one loop over the coordinates, which the compiler codes two to an
   // instruction (three scalar divisions a neighbour were a seventh of the fit).
-  double* scaled = xyz[0].data();
-  for (int t = 0; t < 3 * cnt; ++t) scaled[t] /= h;
+  for (int t = 0; t < 3 * cnt; ++t) xyz[t] /= h;
   for (int j = 0; j < cnt; ++j) {
-    const double x = xyz[size_t(j)].x(), y = xyz[size_t(j)].y();
-    const double z = xyz[size_t(j)].z();
+    const double x = xyz[3 * j], y = xyz[3 * j + 1], z = xyz[3 * j + 2];
     alignas(16) const double f[6] = {1, x, y, x * x, x * y, y * y};
     const double w = wt[size_t(j)];
     for (int r = 0; r < 6; ++r) {
@@ -139,7 +140,7 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   if (ldlt.info() != Eigen::Success || !c.allFinite()) return ls;
   double se = 0;
   for (int j = 0; j < cnt; ++j) {
-    const double x = xyz[size_t(j)].x(), y = xyz[size_t(j)].y(), z = xyz[size_t(j)].z();
+    const double x = xyz[3 * j], y = xyz[3 * j + 1], z = xyz[3 * j + 2];
     const double r = z - (c[0] + c[1] * x + c[2] * y + c[3] * x * x + c[4] * x * y + c[5] * y * y);
     se += wt[size_t(j)] * r * r;
   }
