@@ -223,18 +223,16 @@ bool GridKnn::select(const double* p, Candidates& from, int k, double b2,
 // The k smallest (d2, index) of point i over `cand` into scratch (ascending), then, where the
 // candidates cannot prove it (the k-th lies beyond the gathered block), wider rings and at last
 // every cell, pruned by distance.
-void GridKnn::nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
+void GridKnn::nearest(size_t i, const int64_t c[3], Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
                       double bound2) const {
   const double* p = pos_ + 3 * i;
   // The k smallest of the candidates within bound2 if there are k of them (every candidate
   // left out is then farther than all kept), else of all.
   const double all = std::numeric_limits<double>::infinity();
   if (!select(p, cand, k, bound2, best)) select(p, cand, k, all, best);
-  int64_t c[3];
-  coords(i, c);
   const size_t want = std::min(n_, size_t(k));
   auto proven = [&](int ring) {
-    const double g = reach(p, i, ring);
+    const double g = reach(p, c, ring);
     return best.size() == want && (std::isinf(g) || best.back().first < g * g);
   };
   if (proven(1)) return;
@@ -272,9 +270,7 @@ void GridKnn::nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<d
   }
 }
 
-double GridKnn::reach(const double* p, size_t i, int ring) const {
-  int64_t c[3];
-  coords(i, c);
+double GridKnn::reach(const double* p, const int64_t c[3], int ring) const {
   double g = std::numeric_limits<double>::infinity();
   for (int a = 0; a < 3; ++a) {
     if (c[a] - ring > 0) g = std::min(g, p[a] - (lo_[a] + double(c[a] - ring) * cell_));
@@ -332,7 +328,7 @@ void GridKnn::forEach(int k, const Visit& fn) const {
           const double r = prevR + std::sqrt(dx * dx + dy * dy + dz * dz);
           bound2 = r * r * (1 + 1e-9);
         }
-        nearest(i, cand, k, best, bound2);
+        nearest(i, c, cand, k, best, bound2);
         if (best.size() == size_t(k)) prevR = std::sqrt(best.back().first), prev = p;
         for (size_t j = 0; j < best.size(); ++j) ind[j] = int(best[j].second), d2[j] = best[j].first;
         fn(i, ind.data(), d2.data(), int(best.size()));
@@ -385,7 +381,7 @@ void GridKnn::query(size_t i, int k, std::vector<int>& ind, std::vector<double>&
   Candidates cand;
   gather(c, 1, cand);
   std::vector<std::pair<double, uint32_t>> best;
-  nearest(i, cand, k, best);
+  nearest(i, c, cand, k, best);
   for (const auto& e : best) ind.push_back(int(e.second)), d2.push_back(e.first);
 }
 

@@ -53,7 +53,11 @@ class GridKnn {
   // How far point i lies from the outside of the 3x3x3 block of cells around its cell (infinite
   // where the block reaches the grid's edge on both sides of every axis): every point within
   // that distance of it is in the block.
-  double blockReach(size_t i) const { return reach(pos_ + 3 * i, i, 1); }
+  double blockReach(size_t i) const {
+    int64_t c[3];
+    coords(i, c);
+    return reach(pos_ + 3 * i, c, 1);
+  }
 
   // Every point in the cells that meet the box [lo, hi] (a superset of the points in the box),
   // indices in the grid's order.
@@ -75,8 +79,8 @@ class GridKnn {
   int64_t findCell(uint64_t key) const;
   // The cells [a, b] that meet the box [lo, hi]; false when it misses the grid (or is NaN).
   bool cellRange(const double lo[3], const double hi[3], int64_t a[3], int64_t b[3]) const;
-  // Distance from p (point i) to the outside of the block of cells within `ring` of i's cell.
-  double reach(const double* p, size_t i, int ring) const;
+  // Distance from p (a point of cell c) to the outside of the block of cells within `ring` of c.
+  double reach(const double* p, const int64_t c[3], int ring) const;
   uint64_t keyOf(int64_t x, int64_t y, int64_t z) const;
   void coords(size_t i, int64_t c[3]) const;
   struct Candidates {
@@ -95,7 +99,8 @@ class GridKnn {
   // to it); candidates beyond it are skipped unless that leaves fewer than k. Any value gives the
   // exact answer; a good one only makes it faster.
   bool select(const double* p, Candidates& from, int k, double b2, std::vector<std::pair<double, uint32_t>>& best) const;
-  void nearest(size_t i, Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
+  // c: point i's cell (coords).
+  void nearest(size_t i, const int64_t c[3], Candidates& cand, int k, std::vector<std::pair<double, uint32_t>>& best,
                double bound2 = std::numeric_limits<double>::infinity()) const;
 
   const double* pos_;
