@@ -12,11 +12,12 @@ namespace sa {
 
 struct MarginFinder::Index {
   GridKnn grid;
-  Index(const double* pos, size_t n) : grid(pos, n, GridKnn::cellFor(estimateSpacing(pos, n).area, 24)) {}
+  Index(const double* pos, size_t n, double spacing)
+      : grid(pos, n, GridKnn::cellFor(spacing > 0 ? spacing : estimateSpacing(pos, n).area, 24)) {}
 };
 
-MarginFinder::MarginFinder(const double* pos, const float* nrm, size_t n) : pos_(pos), nrm_(nrm) {
-  if (n > 0) index_ = std::make_unique<Index>(pos, n);
+MarginFinder::MarginFinder(const double* pos, const float* nrm, size_t n, double spacing) : pos_(pos), nrm_(nrm) {
+  if (n > 0) index_ = std::make_unique<Index>(pos, n, spacing);
 }
 
 MarginFinder::~MarginFinder() = default;

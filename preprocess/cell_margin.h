@@ -15,7 +15,9 @@ namespace sa {
 class MarginFinder {
  public:
   // pos: the chunk's points, xyz interleaved (kept by reference); nrm: their unit normals.
-  MarginFinder(const double* pos, const float* nrm, size_t n);
+  // spacing: their area spacing when the caller knows it (estimated otherwise); it sizes the
+  // neighbour grid, which changes how fast the queries are, not what they find.
+  MarginFinder(const double* pos, const float* nrm, size_t n, double spacing = 0);
   ~MarginFinder();
 
   struct Cell {

@@ -108,6 +108,7 @@ struct PackJob {
   std::vector<std::pair<uint32_t, uint32_t>> sampleCells;   // triangle path: (triangle, cell) of its surface samples
   std::vector<std::pair<uint32_t, uint32_t>> triCells;      // triangle path: (triangle, cell) to rasterize, sorted
   std::vector<double> chunkSpacing;  // per chunk: its sample spacing (ChunkPoint::spacing is relative to it)
+  std::vector<double> chunkAreaSpacing;  // per chunk: its area spacing (sizes pass B's neighbour grid)
   HeightMoments heights;             // of the input points, for the sign of a terrain's up axis
   double spacingSum = 0, areaSpacingSum = 0;
   uint64_t spacingWeight = 0;
@@ -438,6 +439,7 @@ void mergeChunkCells(PackJob& job, uint32_t ci, const ChunkCells& c) {
     job.spacingWeight += c.weight;
   }
   job.chunkSpacing[ci] = c.spacing;
+  job.chunkAreaSpacing[ci] = c.areaSpacing;
   job.dist.chunks[ci].count = c.count;
   job.sum.outliersRemoved += c.outliers;
   job.sum.layeredCells += c.layered;
@@ -593,6 +595,7 @@ Status cellsPhase(PackJob& job) {
   const PhaseTimer timer;
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
   job.chunkSpacing.assign(job.dist.chunks.size(), 0.0);
+  job.chunkAreaSpacing.assign(job.dist.chunks.size(), 0.0);
   job.owners = chunkOwners(job.dist.chunks, Cluster::size());
   if (job.dist.chunks.size() < size_t(Cluster::size()))
     job.sum.warnings.push_back(std::to_string(job.dist.chunks.size()) + " chunk(s) for " + std::to_string(Cluster::size()) +
@@ -1118,7 +1121,7 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
   const bool withColor = (job.meta.flags & kPackHasColor) != 0;
   std::vector<float> nrm(job.triangles ? 0 : 3 * pts.size());
   for (size_t i = 0; i < nrm.size() / 3; ++i) std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
-  const MarginFinder margins(pos.data(), nrm.data(), job.triangles ? 0 : pts.size());
+  const MarginFinder margins(pos.data(), nrm.data(), job.triangles ? 0 : pts.size(), job.chunkAreaSpacing[ci]);
   Status failed;
   std::mutex failMu;
   const Precision precision = effectivePrecision(job.opt, job.triangles);
