@@ -143,26 +143,46 @@ Status writeFrames(std::FILE* f, const std::string& path, const ChunkPoint* pts,
   return Status::ok();
 }
 
-// Reads the next frame into out (replacing it); false at the end of the file. A frame that does
-// not decode (a truncated or foreign file) is an error naming the file.
-Result<bool> readFrame(std::FILE* f, const std::string& path, std::vector<ChunkPoint>& out) {
-  ZSTD_DCtx* dctx = threadZstd().d;
-  thread_local std::vector<uint8_t> planes, packed;
-  uint32_t head[3];
+// A frame as stored: its header {records, coded bytes, shift} and its zstd stream.
+struct CodedFrame {
+  uint32_t head[3] = {0, 0, 0};
+  std::vector<uint8_t> packed;
+};
+
+// Reads the next frame's header and coded bytes; false at the end of the file. A header out of
+// range or a short frame is an error naming the file.
+Result<bool> readCodedFrame(std::FILE* f, const std::string& path, CodedFrame& out) {
+  uint32_t* head = out.head;
   const size_t got = std::fread(head, 4, 3, f);
   if (got == 0 && std::feof(f)) return false;
   if (got != 3 || head[0] == 0 || head[0] > kMaxFrameRecords || head[1] > ZSTD_compressBound(size_t(head[0]) * kRec) ||
       (head[2] & 0xe0e0e0e0u) != 0)
     return Status::internal(path + ": chunk file is damaged (a frame header out of range)");
-  packed.resize(head[1]);
-  if (std::fread(packed.data(), 1, head[1], f) != head[1]) return Status::internal(path + ": chunk file is truncated");
-  planes.resize(size_t(head[0]) * kRec);
-  const size_t d = ZSTD_decompressDCtx(dctx, planes.data(), planes.size(), packed.data(), packed.size());
-  if (ZSTD_isError(d) || d != planes.size()) return Status::internal(path + ": chunk file is damaged (a frame does not decode)");
-  const size_t m = head[0];
-  out.resize(m);
-  unshuffleRecords(planes.data(), m, reinterpret_cast<uint8_t*>(out.data()));
-  undeltaPositions(out.data(), m, head[2]);
+  out.packed.resize(head[1]);
+  if (std::fread(out.packed.data(), 1, head[1], f) != head[1]) return Status::internal(path + ": chunk file is truncated");
+  return true;
+}
+
+// Decodes a frame's head[0] records into dst; false when they do not decode.
+bool decodeFrame(const CodedFrame& in, ChunkPoint* dst) {
+  thread_local std::vector<uint8_t> planes;
+  const size_t m = in.head[0];
+  planes.resize(m * kRec);
+  const size_t d = ZSTD_decompressDCtx(threadZstd().d, planes.data(), planes.size(), in.packed.data(), in.packed.size());
+  if (ZSTD_isError(d) || d != planes.size()) return false;
+  unshuffleRecords(planes.data(), m, reinterpret_cast<uint8_t*>(dst));
+  undeltaPositions(dst, m, in.head[2]);
+  return true;
+}
+
+// Reads the next frame into out (replacing it); false at the end of the file. A frame that does
+// not decode (a truncated or foreign file) is an error naming the file.
+Result<bool> readFrame(std::FILE* f, const std::string& path, std::vector<ChunkPoint>& out) {
+  thread_local CodedFrame coded;
+  Result<bool> more = readCodedFrame(f, path, coded);
+  if (!more.isOk() || !*more) return more;
+  out.resize(coded.head[0]);
+  if (!decodeFrame(coded, out.data())) return Status::internal(path + ": chunk file is damaged (a frame does not decode)");
   return true;
 }
 
@@ -616,19 +636,37 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
   return Status::ok();
 }
 
+// Frames are read in batches, a few per thread, and decoded on every core into their places.
 Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out) {
   out.clear();
   out.reserve(chunk.count);
   std::FILE* f = std::fopen(chunk.path.c_str(), "rb");
   if (!f) return Status::internal(chunk.path + ": cannot open chunk file");
-  std::vector<ChunkPoint> frame;
+  std::vector<CodedFrame> batch(2 * size_t(std::max(1, tbb::this_task_arena::max_concurrency())));
   Status st;
-  while (st.isOk()) {
-    Result<bool> more = readFrame(f, chunk.path, frame);
-    if (!more.isOk()) st = more.status();
-    if (!st.isOk() || !*more) break;
-    if (out.size() + frame.size() > chunk.count) st = Status::internal(chunk.path + ": chunk file longer than recorded");
-    else out.insert(out.end(), frame.begin(), frame.end());
+  for (bool more = true; more && st.isOk();) {
+    size_t count = 0;
+    for (; count < batch.size(); ++count) {
+      Result<bool> r = readCodedFrame(f, chunk.path, batch[count]);
+      if (!r.isOk()) st = r.status();
+      if (!st.isOk() || !*r) {
+        more = false;
+        break;
+      }
+    }
+    if (!st.isOk()) break;
+    std::vector<size_t> at(count + 1, out.size());
+    for (size_t b = 0; b < count; ++b) at[b + 1] = at[b] + batch[b].head[0];
+    if (at[count] > chunk.count) {
+      st = Status::internal(chunk.path + ": chunk file longer than recorded");
+      break;
+    }
+    out.resize(at[count]);
+    std::atomic<bool> bad{false};
+    tbb::parallel_for(size_t(0), count, [&](size_t b) {
+      if (!decodeFrame(batch[b], out.data() + at[b])) bad = true;
+    });
+    if (bad) st = Status::internal(chunk.path + ": chunk file is damaged (a frame does not decode)");
   }
   std::fclose(f);
   SA_RETURN_IF_ERROR(st);
