@@ -249,22 +249,32 @@ std::vector<uint32_t> layOutKept(std::vector<ChunkPoint>& pts, std::vector<doubl
   const size_t n = pts.size();
   std::vector<uint32_t> rank(n);  // a kept point's index among the kept, in the file's order
   std::vector<uint8_t> kept(n);
-  for (size_t i = 0; i < n; ++i) kept[order[i]] = keep[i];
+  const tbb::blocked_range<size_t> all(0, n, 1 << 14);
+  tbb::parallel_for(all, [&](const tbb::blocked_range<size_t>& b) {
+    for (size_t i = b.begin(); i != b.end(); ++i) kept[order[i]] = keep[i];
+  });
   uint32_t r = 0;
   for (size_t o = 0; o < n; ++o) rank[o] = kept[o] ? r++ : 0;
-  std::vector<uint32_t> place(r);
-  std::vector<ChunkPoint> laid;
-  laid.reserve(r);
+  std::vector<uint32_t> to(n);  // where a kept point goes in the grid's order
+  uint32_t m = 0;
   for (size_t i = 0; i < n; ++i) {
-    if (!keep[i]) continue;
-    const uint32_t m = uint32_t(laid.size());
-    place[rank[order[i]]] = m;
-    laid.push_back(pts[order[i]]);
-    if (m != i) {
-      std::copy_n(&pos[3 * i], 3, &pos[3 * size_t(m)]);
-      std::copy_n(&nrm[3 * i], 3, &nrm[3 * size_t(m)]);
-    }
+    to[i] = m;
+    m += keep[i];
   }
+  std::vector<uint32_t> place(r);
+  std::vector<ChunkPoint> laid(r);
+  tbb::parallel_for(all, [&](const tbb::blocked_range<size_t>& b) {  // the records, gathered on every core
+    for (size_t i = b.begin(); i != b.end(); ++i)
+      if (keep[i]) {
+        place[rank[order[i]]] = to[i];
+        laid[to[i]] = pts[order[i]];
+      }
+  });
+  for (size_t i = 0; i < n; ++i)  // in place: a kept point moves down only
+    if (keep[i] && to[i] != i) {
+      std::copy_n(&pos[3 * i], 3, &pos[3 * size_t(to[i])]);
+      std::copy_n(&nrm[3 * i], 3, &nrm[3 * size_t(to[i])]);
+    }
   pts = std::move(laid);
   pos.resize(3 * size_t(r));
   nrm.resize(3 * size_t(r));
@@ -296,8 +306,10 @@ std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint
   std::vector<uint32_t> order;
   so.layOut = true;
   removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data(), &order);
-  for (size_t i = 0; i < pts.size(); ++i)
-    pts[order[i]].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& b) {
+    for (size_t i = b.begin(); i != b.end(); ++i)
+      pts[order[i]].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
+  });
   return layOutKept(pts, pos, nrm, keep, order);
 }
 
