@@ -136,15 +136,18 @@ struct OctreeBuild {
   std::vector<OctreeCell> build(const Item& it) const {
     std::vector<OctreeCell> out;
     if (it.count == 0) return out;
-    PlaneFit fit = fitPlane(pos, nrm, idx + it.first, it.count, cosMax, outliers, cone);
     const bool canSplit = it.level < params.maxDepth && it.count >= minSplit;
+    const bool tooLarge = params.maxLeafPoints && it.count > params.maxLeafPoints;
+    // A node that splits whatever its test says needs no fit: at a chunk's root, the fit over
+    // all its points ran on one core while the other waited.
+    if (tooLarge && canSplit) return children(it);
+    PlaneFit fit = fitPlane(pos, nrm, idx + it.first, it.count, cosMax, outliers, cone);
     if (fit.heightField &&
         countLayeredBins(pos, idx + it.first, it.count, fit, params.layerBin, params.layerGap, params.layeredBins) >=
             params.layeredBins) {
       fit.heightField = false;
       fit.layered = true;
     }
-    const bool tooLarge = params.maxLeafPoints && it.count > params.maxLeafPoints;
     if ((fit.heightField && !tooLarge) || !canSplit) {
       OctreeCell c;
       c.fit = fit;
@@ -157,6 +160,12 @@ struct OctreeBuild {
       out.push_back(c);
       return out;
     }
+    return children(it);
+  }
+
+  // The cells of the node's eight children's subtrees.
+  std::vector<OctreeCell> children(const Item& it) const {
+    std::vector<OctreeCell> out;
     std::array<Item, 8> ch = split(it);
     std::array<std::vector<OctreeCell>, 8> sub;
     if (it.count >= kParallelPoints) {
