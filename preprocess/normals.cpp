@@ -256,7 +256,9 @@ size_t propagateOrientation(const NeighbourLists& weakLists, size_t n, const Ord
   // Seeds: undecided points next to decided ones (votes read only the cue-decided, so the seeds
   // do not depend on their order).
   std::vector<double> seedVote(weak.size(), 0);
-  for (size_t a = 0; a < weak.size(); ++a) seedVote[a] = vote(a);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, weak.size(), 1 << 10), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t a = r.begin(); a != r.end(); ++a) seedVote[a] = vote(a);
+  });
   for (size_t a = 0; a < weak.size(); ++a)
     if (seedVote[a] != 0) decide(a, seedVote[a]);
   for (size_t head = 0; head < queue.size(); ++head) {
@@ -434,8 +436,10 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
     laidOrient = orient;
     if (orient.scan) {
       scans.resize(n);
-      for (size_t i = 0; i < n; ++i)
-        scans[i] = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + orig[i] * orient.scanStride);
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i)
+          scans[i] = *reinterpret_cast<const uint16_t*>(reinterpret_cast<const char*>(orient.scan) + orig[i] * orient.scanStride);
+      });
       laidOrient.scan = scans.data();
       laidOrient.scanStride = sizeof(uint16_t);
     }
