@@ -280,15 +280,22 @@ ChunkInfo chunkInfoOf(const std::string& path, uint64_t id, uint64_t count) {
   return ch;
 }
 
-// Buffers records per chunk node (nodeId) and appends them to the node's file when full.
+// Buffers records per chunk node (nodeId) and appends them to the node's file when full. Full
+// buffers wait until a few per thread are full, are coded on every core and appended in the
+// order they filled: each file's bytes are those of appending them one at a time.
 class ChunkFiles {
  public:
-  explicit ChunkFiles(const std::string& dir) : dir_(dir) {}
+  explicit ChunkFiles(const std::string& dir)
+      : dir_(dir), batch_(2 * size_t(std::max(1, tbb::this_task_arena::max_concurrency()))) {}
   std::string pathOf(uint64_t id) const {
     return joinPath(dir_, "chunk_L" + std::to_string(levelOfNode(id)) + "_" + std::to_string(keyOfNode(id)) + ".bin");
   }
   Status add(uint64_t key, const ChunkPoint& p) {
-    Node& n = nodes_[key];
+    if (!last_ || key != lastKey_) {  // points come in runs of one node (a scan's order, a split chunk's)
+      last_ = &nodes_[key];
+      lastKey_ = key;
+    }
+    Node& n = *last_;
     n.buf.push_back(p);
     ++n.count;
     if (n.buf.size() >= kFlush) return flush(key, n);
@@ -296,7 +303,7 @@ class ChunkFiles {
   }
   Status flushAll() {
     for (auto& [k, n] : nodes_) SA_RETURN_IF_ERROR(flush(k, n));
-    return Status::ok();
+    return writePending();
   }
   template <class F>
   void forEach(F f) const {
@@ -306,20 +313,42 @@ class ChunkFiles {
  private:
   static constexpr size_t kFlush = 8192;  // 288 KiB per open node
   struct Node { std::vector<ChunkPoint> buf; uint64_t count = 0; };
+  struct Full {
+    uint64_t key;
+    std::vector<ChunkPoint> buf;
+    std::vector<uint8_t> coded;
+    std::string error;
+  };
   Status flush(uint64_t key, Node& n) {
     if (n.buf.empty()) return Status::ok();
-    std::string path = pathOf(key);
-    std::FILE* f = std::fopen(path.c_str(), "ab");
-    if (!f) return Status::internal(path + ": cannot write chunk file: " + std::strerror(errno));
-    Status st = writeFrames(f, path, n.buf.data(), n.buf.size());
-    if (std::fclose(f) != 0 && st.isOk()) st = Status::internal(path + ": short write (disk full?)");
-    SA_RETURN_IF_ERROR(st);
-    n.buf.clear();
-    n.buf.shrink_to_fit();
+    pending_.push_back({key, std::move(n.buf), {}, {}});
+    n.buf = {};
+    return pending_.size() >= batch_ ? writePending() : Status::ok();
+  }
+  Status writePending() {
+    tbb::parallel_for(size_t(0), pending_.size(), [&](size_t i) {
+      Full& w = pending_[i];
+      encodeFrame(w.buf.data(), w.buf.size(), w.coded, w.error);
+    });
+    for (Full& w : pending_) {
+      const std::string path = pathOf(w.key);
+      if (!w.error.empty()) return Status::internal(path + ": cannot compress a chunk frame: " + w.error);
+      std::FILE* f = std::fopen(path.c_str(), "ab");
+      if (!f) return Status::internal(path + ": cannot write chunk file: " + std::strerror(errno));
+      const bool full = std::fwrite(w.coded.data(), 1, w.coded.size(), f) == w.coded.size();
+      if ((std::fclose(f) != 0 || !full)) return Status::internal(path + ": short write (disk full?)");
+      gScratchBytes += w.coded.size();
+      gScratchRaw += w.buf.size() * kRec;
+    }
+    pending_.clear();
     return Status::ok();
   }
   std::string dir_;
+  size_t batch_;
   std::map<uint64_t, Node> nodes_;
+  std::vector<Full> pending_;
+  Node* last_ = nullptr;
+  uint64_t lastKey_ = 0;
 };
 
 uint64_t keyOf(uint32_t ix, uint32_t iy, uint32_t iz, int level) {
@@ -440,28 +469,35 @@ class DistributeSink : public BatchSink {
   ~DistributeSink() override {
     if (tri_) std::fclose(tri_);
   }
+  // The records and their chunks are made on every core; they go to their chunks' buffers in
+  // the batch's order.
   Status onPoints(const PointBatch& b) override {
-    for (size_t i = 0; i < b.size(); ++i) {
-      if (!finite3(b.x[i], b.y[i], b.z[i])) continue;
-      ChunkPoint p{};
-      quantize(b, i, qz_, opt_.origin, p.q);
-      if (b.hasNormals()) {
-        p.n[0] = b.nx[i]; p.n[1] = b.ny[i]; p.n[2] = b.nz[i];
-        p.flags |= kChunkHasNormal;
-      }
-      if (b.hasColors()) { p.rgb[0] = b.r[i]; p.rgb[1] = b.g[i]; p.rgb[2] = b.b[i]; }
-      p.scan = b.scan.empty() ? 0 : b.scan[i];
-      p.vid = static_cast<uint32_t>(b.firstIndex + i);
-      if (opt_.keepTriangles) {
-        if (out_.vertexPos.size() < 3 * (size_t(p.vid) + 1)) {
-          out_.vertexPos.resize(3 * (size_t(p.vid) + 1), 0.0);
+    const size_t m = b.size();
+    if (opt_.keepTriangles) keepVertices(b);
+    recs_.resize(m);
+    nodes_.resize(m);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) {
+        if (!finite3(b.x[i], b.y[i], b.z[i])) {
+          nodes_[i] = kSkipped;
+          continue;
         }
-        const double rel[3] = {b.x[i] - opt_.origin.x(), b.y[i] - opt_.origin.y(), b.z[i] - opt_.origin.z()};
-        for (int a = 0; a < 3; ++a) out_.vertexPos[3 * size_t(p.vid) + a] = rel[a];
+        ChunkPoint& p = recs_[i];
+        p = ChunkPoint{};
+        quantize(b, i, qz_, opt_.origin, p.q);
+        if (b.hasNormals()) {
+          p.n[0] = b.nx[i]; p.n[1] = b.ny[i]; p.n[2] = b.nz[i];
+          p.flags |= kChunkHasNormal;
+        }
+        if (b.hasColors()) { p.rgb[0] = b.r[i]; p.rgb[1] = b.g[i]; p.rgb[2] = b.b[i]; }
+        p.scan = b.scan.empty() ? 0 : b.scan[i];
+        p.vid = static_cast<uint32_t>(b.firstIndex + i);
+        nodes_[i] = nodeOf(p.q);
       }
-      SA_RETURN_IF_ERROR(files_.add(nodeOf(p.q), p));
-    }
-    seen_ += b.size();
+    });
+    for (size_t i = 0; i < m; ++i)
+      if (nodes_[i] != kSkipped) SA_RETURN_IF_ERROR(files_.add(nodes_[i], recs_[i]));
+    seen_ += m;
     if (progress_) progress_("distribute", plan_ ? total_ / 2 + seen_ / 2 : seen_, total_);
     return Status::ok();
   }
@@ -486,6 +522,19 @@ class DistributeSink : public BatchSink {
   }
 
  private:
+  // Mesh vertices' positions, by index, for the triangles that follow.
+  void keepVertices(const PointBatch& b) {
+    for (size_t i = 0; i < b.size(); ++i) {
+      if (!finite3(b.x[i], b.y[i], b.z[i])) continue;
+      const size_t vid = static_cast<uint32_t>(b.firstIndex + i);
+      if (out_.vertexPos.size() < 3 * (vid + 1)) out_.vertexPos.resize(3 * (vid + 1), 0.0);
+      const double rel[3] = {b.x[i] - opt_.origin.x(), b.y[i] - opt_.origin.y(), b.z[i] - opt_.origin.z()};
+      for (int a = 0; a < 3; ++a) out_.vertexPos[3 * vid + a] = rel[a];
+    }
+  }
+  static constexpr uint64_t kSkipped = UINT64_MAX;  // a NaN or infinite point: no node
+  std::vector<ChunkPoint> recs_;
+  std::vector<uint64_t> nodes_;
   // The chunk node a point goes to: the plan's chunk holding it, else its node at the start level.
   uint64_t nodeOf(const uint32_t q[3]) const { return plan_ ? plan_->nodeOf(q) : nodeId(level_, keyAt(q, level_)); }
   const Quantizer& qz_;
