@@ -380,13 +380,18 @@ class HistogramSink : public BatchSink {
  public:
   HistogramSink(const Quantizer& qz, const Eigen::Vector3d& origin, int level, const ProgressFn& p, uint64_t total)
       : qz_(qz), origin_(origin), level_(level), counts_(size_t(1) << (3 * level), 0), progress_(p), total_(total) {}
+  // The nodes found on every core, counted in order.
   Status onPoints(const PointBatch& b) override {
-    for (size_t i = 0; i < b.size(); ++i) {
-      if (!finite3(b.x[i], b.y[i], b.z[i])) continue;
-      uint32_t q[3];
-      quantize(b, i, qz_, origin_, q);
-      ++counts_[keyAt(q, level_)];
-    }
+    keys_.resize(b.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, b.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) {
+        uint32_t q[3];
+        quantize(b, i, qz_, origin_, q);
+        keys_[i] = finite3(b.x[i], b.y[i], b.z[i]) ? keyAt(q, level_) : kSkipped;
+      }
+    });
+    for (uint64_t k : keys_)
+      if (k != kSkipped) ++counts_[k];
     seen_ += b.size();
     if (progress_) progress_("distribute", seen_ / 2, total_);
     return Status::ok();
@@ -394,6 +399,8 @@ class HistogramSink : public BatchSink {
   std::vector<uint64_t>& counts() { return counts_; }
 
  private:
+  static constexpr uint64_t kSkipped = UINT64_MAX;  // a NaN or infinite point
+  std::vector<uint64_t> keys_;
   const Quantizer& qz_;
   Eigen::Vector3d origin_;
   int level_;
