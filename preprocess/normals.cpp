@@ -6,6 +6,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
@@ -494,6 +495,26 @@ void nearestDistances(const double* tp, size_t m, size_t queries, Accept accept,
   }
 }
 
+// The first `cap` points of pos[0..n) (in order) within `half` of c on every axis, into out
+// (xyz-interleaved): blocks scanned on every core, a few at a time, until the cap is reached.
+void pointsInCube(const double* pos, size_t n, const Eigen::Vector3d& c, double half, size_t cap, std::vector<double>& out) {
+  out.clear();
+  constexpr size_t kBlock = 1 << 14, kBlocks = 16;
+  std::vector<double> found[kBlocks];
+  for (size_t first = 0; first < n && out.size() < 3 * cap; first += kBlock * kBlocks) {
+    tbb::parallel_for(size_t(0), kBlocks, [&](size_t b) {
+      found[b].clear();
+      const size_t lo = std::min(n, first + b * kBlock), hi = std::min(n, lo + kBlock);
+      for (size_t i = lo; i < hi; ++i) {
+        const Eigen::Vector3d p(&pos[3 * i]);
+        if (((p - c).cwiseAbs().array() <= half).all()) found[b].insert(found[b].end(), {p.x(), p.y(), p.z()});
+      }
+    });
+    for (size_t b = 0; b < kBlocks && out.size() < 3 * cap; ++b)
+      out.insert(out.end(), found[b].begin(), found[b].begin() + long(std::min(found[b].size(), 3 * cap - out.size())));
+  }
+}
+
 }  // namespace
 
 Spacing estimateSpacing(const double* pos, size_t n, size_t samples) {
@@ -507,31 +528,46 @@ Spacing estimateSpacing(const double* pos, size_t n, size_t samples) {
     // Spacing is local: take a few sub-cubes holding about kMaxTree / 4 points each (at full
     // density, so regular scan grids keep their true spacing), and query only points away
     // from the sub-cube's faces.
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-    for (size_t i = 0; i < n; ++i) {
-      lo = lo.cwiseMin(Eigen::Vector3d(&pos[3 * i]));
-      hi = hi.cwiseMax(Eigen::Vector3d(&pos[3 * i]));
-    }
+    const tbb::blocked_range<size_t> all(0, n, 1 << 15);
+    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
+    const Box box = tbb::parallel_reduce(
+        all, Box(Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)),
+        [&](const tbb::blocked_range<size_t>& r, Box b) {
+          for (size_t i = r.begin(); i != r.end(); ++i) {
+            b.first = b.first.cwiseMin(Eigen::Vector3d(&pos[3 * i]));
+            b.second = b.second.cwiseMax(Eigen::Vector3d(&pos[3 * i]));
+          }
+          return b;
+        },
+        [](const Box& a, const Box& b) { return Box(a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)); });
     const size_t want = kMaxTree / 4;
-    double side = (hi - lo).maxCoeff() * std::sqrt(double(want) / double(n));  // surfaces: area ~ side^2
-    std::vector<double> sub;
+    double side = (box.second - box.first).maxCoeff() * std::sqrt(double(want) / double(n));  // surfaces: area ~ side^2
+    // The sub-cubes one after the other (each starts from the side the one before settled on),
+    // then their distances on every core, appended in order.
+    std::vector<double> sub[4];
+    double inner[4];
     for (int seed = 0; seed < 4; ++seed) {
       const Eigen::Vector3d c(&pos[3 * ((2 * seed + 1) * n / 8)]);
       for (int attempt = 0; attempt < 8; ++attempt) {
-        sub.clear();
-        for (size_t i = 0; i < n && sub.size() <= 3 * 4 * want; ++i) {
-          const Eigen::Vector3d p(&pos[3 * i]);
-          if (((p - c).cwiseAbs().array() <= side / 2).all()) sub.insert(sub.end(), {p.x(), p.y(), p.z()});
-        }
-        const size_t m = sub.size() / 3;
+        pointsInCube(pos, n, c, side / 2, 4 * want + 1, sub[seed]);
+        const size_t m = sub[seed].size() / 3;
         if (m < want / 4) side *= 1.6;
         else if (m > 4 * want) side /= 1.6;
         else break;
       }
-      const double inner = side / 4;
-      nearestDistances(sub.data(), sub.size() / 3, samples / 4, [&](size_t a) {
-        return ((Eigen::Vector3d(&sub[3 * a]) - c).cwiseAbs().array() <= inner).all();
-      }, d, area);
+      inner[seed] = side / 4;
+    }
+    std::vector<double> ds[4], areas[4];
+    tbb::parallel_for(0, 4, [&](int seed) {
+      const Eigen::Vector3d c(&pos[3 * ((2 * seed + 1) * n / 8)]);
+      const std::vector<double>& sb = sub[seed];
+      nearestDistances(sb.data(), sb.size() / 3, samples / 4, [&](size_t a) {
+        return ((Eigen::Vector3d(&sb[3 * a]) - c).cwiseAbs().array() <= inner[seed]).all();
+      }, ds[seed], areas[seed]);
+    });
+    for (int seed = 0; seed < 4; ++seed) {
+      d.insert(d.end(), ds[seed].begin(), ds[seed].end());
+      area.insert(area.end(), areas[seed].begin(), areas[seed].end());
     }
   }
   auto median = [](std::vector<double>& v) {
