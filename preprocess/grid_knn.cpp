@@ -2,7 +2,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -41,6 +40,43 @@ uint64_t compact(uint64_t v) {  // the inverse of spread
 
 }  // namespace
 
+namespace {
+
+// (key, index) pairs made in index order, sorted by key and then index: a stable radix sort on
+// the key over its used bits, 11 at a time, each pass counted and scattered by blocks on every
+// core (the comparison sort's first partitions ran on one core).
+void sortKeyed(std::vector<std::pair<uint64_t, uint32_t>>& keyed) {
+  const size_t n = keyed.size();
+  constexpr size_t kBlock = 1 << 15;
+  constexpr int kBits = 11, kDigits = 1 << kBits;
+  uint64_t any = 0;
+  for (const auto& e : keyed) any |= e.first;
+  const size_t blocks = (n + kBlock - 1) / kBlock;
+  std::vector<std::pair<uint64_t, uint32_t>> tmp(n);
+  std::vector<uint32_t> at(blocks * kDigits);
+  for (int shift = 0; shift < 64 && (any >> shift); shift += kBits) {
+    tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+      uint32_t* h = &at[b * kDigits];
+      std::fill(h, h + kDigits, 0u);
+      for (size_t i = b * kBlock, e = std::min(n, i + kBlock); i < e; ++i) ++h[(keyed[i].first >> shift) & (kDigits - 1)];
+    });
+    uint32_t sum = 0;  // where each block's run of each digit starts: digits in order, blocks in order within
+    for (size_t d = 0; d < size_t(kDigits); ++d)
+      for (size_t b = 0; b < blocks; ++b) {
+        const uint32_t c = at[b * kDigits + d];
+        at[b * kDigits + d] = sum;
+        sum += c;
+      }
+    tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+      uint32_t* h = &at[b * kDigits];
+      for (size_t i = b * kBlock, e = std::min(n, i + kBlock); i < e; ++i) tmp[h[(keyed[i].first >> shift) & (kDigits - 1)]++] = keyed[i];
+    });
+    keyed.swap(tmp);
+  }
+}
+
+}  // namespace
+
 double GridKnn::cellFor(double spacing, int k) { return 1.3 * spacing * std::sqrt(std::max(k, 1) / M_PI); }
 
 GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell), sortedPos_(nullptr) {
@@ -53,7 +89,6 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
   if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;
   if (extent / cell_ >= double(kMaxDim - 1)) cell_ = extent / double(kMaxDim - 2);
   for (int a = 0; a < 3; ++a) dims_[a] = n ? int64_t(std::floor((hi[a] - lo_[a]) / cell_)) + 1 : 1;
-  // (key, index) pairs are unique: the parallel sort's result does not depend on scheduling.
   std::vector<std::pair<uint64_t, uint32_t>> keyed(n);
   constexpr size_t kGrain = 1 << 14;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
@@ -63,7 +98,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
       keyed[i] = {keyOf(c[0], c[1], c[2]), uint32_t(i)};
     }
   });
-  tbb::parallel_sort(keyed.begin(), keyed.end());
+  sortKeyed(keyed);
   order_.resize(n);
   sorted_.resize(3 * n);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
