@@ -110,6 +110,48 @@ uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, cons
   return layered;
 }
 
+uint32_t* partitionBelow(uint32_t* b, uint32_t* e, const double* pos, int axis, double mid) {
+  auto below = [=](uint32_t i) { return pos[3 * size_t(i) + size_t(axis)] < mid; };
+  const size_t n = size_t(e - b);
+  constexpr size_t kBlock = 1 << 14;
+  if (n < 4 * kBlock) return std::partition(b, e, below);
+  const size_t blocks = (n + kBlock - 1) / kBlock;
+  std::vector<uint8_t> in(n);
+  std::vector<size_t> count(blocks);
+  tbb::parallel_for(size_t(0), blocks, [&](size_t k) {
+    size_t c = 0;
+    for (size_t i = k * kBlock, end = std::min(n, i + kBlock); i < end; ++i) c += in[i] = below(b[i]);
+    count[k] = c;
+  });
+  size_t split = 0;
+  for (size_t c : count) split += c;
+  // Per block, its indices on the wrong side: before the split, those that go right (counted
+  // from the start); from the split, those that go left (counted from the end).
+  std::vector<size_t> right(blocks + 1, 0), left(blocks + 1, 0);
+  tbb::parallel_for(size_t(0), blocks, [&](size_t k) {
+    size_t r = 0, l = 0;
+    for (size_t i = k * kBlock, end = std::min(n, i + kBlock); i < end; ++i) {
+      r += i < split && !in[i];
+      l += i >= split && in[i];
+    }
+    right[k + 1] = r, left[k + 1] = l;
+  });
+  for (size_t k = 0; k < blocks; ++k) right[k + 1] += right[k], left[k + 1] += left[k];
+  const size_t wrong = right[blocks];  // as many go each way
+  std::vector<uint32_t> goRight(wrong), goLeft(wrong);
+  tbb::parallel_for(size_t(0), blocks, [&](size_t k) {
+    size_t r = right[k], l = wrong - left[k];  // goLeft is filled from its end: the last first
+    for (size_t i = k * kBlock, end = std::min(n, i + kBlock); i < end; ++i) {
+      if (i < split && !in[i]) goRight[r++] = uint32_t(i);
+      if (i >= split && in[i]) goLeft[--l] = uint32_t(i);
+    }
+  });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, wrong, kBlock), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t j = r.begin(); j != r.end(); ++j) std::swap(b[goRight[j]], b[goLeft[j]]);
+  });
+  return b + split;
+}
+
 namespace {
 
 struct OctreeBuild {
@@ -182,20 +224,19 @@ struct OctreeBuild {
     const Eigen::Vector3d mid = it.min + Eigen::Vector3d::Constant(it.size / 2);
     uint32_t* b = idx + it.first;
     uint32_t* e = b + it.count;
-    const double* p = pos;
-    auto side = [p, &mid](int axis) { return [=](uint32_t i) { return p[3 * size_t(i) + axis] < mid[axis]; }; };
-    uint32_t* xs = std::partition(b, e, side(0));
+    auto part = [&](uint32_t* from, uint32_t* to, int axis) { return partitionBelow(from, to, pos, axis, mid[axis]); };
+    uint32_t* xs = part(b, e, 0);
     uint32_t* ranges[9];
-    uint32_t* ys[2] = {std::partition(b, xs, side(1)), std::partition(xs, e, side(1))};
+    uint32_t* ys[2] = {part(b, xs, 1), part(xs, e, 1)};
     ranges[0] = b;
     ranges[2] = ys[0];
     ranges[4] = xs;
     ranges[6] = ys[1];
     ranges[8] = e;
-    ranges[1] = std::partition(ranges[0], ranges[2], side(2));
-    ranges[3] = std::partition(ranges[2], ranges[4], side(2));
-    ranges[5] = std::partition(ranges[4], ranges[6], side(2));
-    ranges[7] = std::partition(ranges[6], ranges[8], side(2));
+    ranges[1] = part(ranges[0], ranges[2], 2);
+    ranges[3] = part(ranges[2], ranges[4], 2);
+    ranges[5] = part(ranges[4], ranges[6], 2);
+    ranges[7] = part(ranges[6], ranges[8], 2);
     const double h = it.size / 2;
     std::array<Item, 8> ch;
     for (int c = 0; c < 8; ++c) {

@@ -69,6 +69,12 @@ struct OctreeCell {
   double cubeSize = 0;
 };
 
+// Reorders idx[b..e) so that the indices whose point's coordinate `axis` is below `mid` come
+// first; returns where the others begin. The order is std::partition's (the k-th index that
+// must move right trades places with the k-th from the end that must move left), so octrees
+// are the same as before; large ranges are tested, counted and swapped on every core.
+uint32_t* partitionBelow(uint32_t* b, uint32_t* e, const double* pos, int axis, double mid);
+
 // Subdivides the cube (cubeMin, cubeSize, at octree level `level`) holding points idx.
 // Permutes idx so every emitted cell's points are contiguous; appends cells to `out`.
 // cone: as fitPlane's (may be null).

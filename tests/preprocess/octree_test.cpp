@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "../common/test_util.h"
@@ -46,6 +47,29 @@ Cloud tiltedPlane(const Eigen::Vector3d& n, unsigned seed) {
     c.add(p, n);
   }
   return c;
+}
+
+// The parallel partition must give std::partition's order exactly (octrees, and so packs, stay
+// the same): small ranges, ranges past the parallel threshold, every index on one side, and
+// shuffled indices over points in random order.
+TEST(Octree, PartitionBelowIsStdPartitionsOrder) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (size_t n : {size_t(0), size_t(1), size_t(1000), size_t(65535), size_t(65536), size_t(200001), size_t(1000003)}) {
+    std::vector<double> pos(3 * n);
+    for (double& v : pos) v = u(rng);
+    std::vector<uint32_t> idx(n);
+    for (uint32_t i = 0; i < n; ++i) idx[i] = i;
+    std::shuffle(idx.begin(), idx.end(), rng);
+    for (double mid : {-1.0, 0.3, 0.5, 2.0})
+      for (int axis = 0; axis < 3; ++axis) {
+        std::vector<uint32_t> want = idx, got = idx;
+        const auto w = std::partition(want.begin(), want.end(), [&](uint32_t i) { return pos[3 * i + axis] < mid; }) - want.begin();
+        const auto g = partitionBelow(got.data(), got.data() + n, pos.data(), axis, mid) - got.data();
+        ASSERT_EQ(w, g) << n << " points, axis " << axis << ", mid " << mid;
+        ASSERT_EQ(want, got) << n << " points, axis " << axis << ", mid " << mid;
+      }
+  }
 }
 
 TEST(Octree, TiltedPlaneIsOneCell) {
