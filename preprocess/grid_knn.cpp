@@ -2,8 +2,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -80,10 +82,21 @@ void sortKeyed(std::vector<std::pair<uint64_t, uint32_t>>& keyed) {
 double GridKnn::cellFor(double spacing, int k) { return 1.3 * spacing * std::sqrt(std::max(k, 1) / M_PI); }
 
 GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell), sortedPos_(nullptr) {
+  using Box = std::array<double, 6>;  // lo, hi: min and max are exact in any order
+  const double inf = std::numeric_limits<double>::infinity();
+  const Box box = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, n, 1 << 15), Box{inf, inf, inf, -inf, -inf, -inf},
+      [&](const tbb::blocked_range<size_t>& r, Box b) {
+        for (size_t i = r.begin(); i != r.end(); ++i)
+          for (int a = 0; a < 3; ++a) b[a] = std::min(b[a], pos[3 * i + a]), b[3 + a] = std::max(b[3 + a], pos[3 * i + a]);
+        return b;
+      },
+      [](Box a, const Box& b) {
+        for (int k = 0; k < 3; ++k) a[k] = std::min(a[k], b[k]), a[3 + k] = std::max(a[3 + k], b[3 + k]);
+        return a;
+      });
   double hi[3];
-  for (int a = 0; a < 3; ++a) lo_[a] = std::numeric_limits<double>::infinity(), hi[a] = -lo_[a];
-  for (size_t i = 0; i < n; ++i)
-    for (int a = 0; a < 3; ++a) lo_[a] = std::min(lo_[a], pos[3 * i + a]), hi[a] = std::max(hi[a], pos[3 * i + a]);
+  for (int a = 0; a < 3; ++a) lo_[a] = box[a], hi[a] = box[3 + a];
   double extent = 0;
   for (int a = 0; a < 3; ++a) extent = n ? std::max(extent, hi[a] - lo_[a]) : 0;
   if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;

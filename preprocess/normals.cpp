@@ -432,7 +432,9 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   std::vector<uint16_t> scans;
   const bool laid = opt.layOut && order;
   if (laid) {
-    std::copy(src.begin(), src.end(), pos);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 15), [&](const tbb::blocked_range<size_t>& r) {
+      std::copy(src.begin() + long(3 * r.begin()), src.begin() + long(3 * r.end()), pos + 3 * r.begin());
+    });
     permuteInPlace(nrm, 3, orig);
     laidOrient = orient;
     if (orient.scan) {
