@@ -336,7 +336,7 @@ class ChunkFiles {
       std::FILE* f = std::fopen(path.c_str(), "ab");
       if (!f) return Status::internal(path + ": cannot write chunk file: " + std::strerror(errno));
       const bool full = std::fwrite(w.coded.data(), 1, w.coded.size(), f) == w.coded.size();
-      if ((std::fclose(f) != 0 || !full)) return Status::internal(path + ": short write (disk full?)");
+      if (std::fclose(f) != 0 || !full) return Status::internal(path + ": short write (disk full?)");
       gScratchBytes += w.coded.size();
       gScratchRaw += w.buf.size() * kRec;
     }
@@ -482,11 +482,11 @@ class DistributeSink : public BatchSink {
     const size_t m = b.size();
     if (opt_.keepTriangles) keepVertices(b);
     recs_.resize(m);
-    nodes_.resize(m);
+    chunkOf_.resize(m);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i != r.end(); ++i) {
         if (!finite3(b.x[i], b.y[i], b.z[i])) {
-          nodes_[i] = kSkipped;
+          chunkOf_[i] = kSkipped;
           continue;
         }
         ChunkPoint& p = recs_[i];
@@ -499,11 +499,11 @@ class DistributeSink : public BatchSink {
         if (b.hasColors()) { p.rgb[0] = b.r[i]; p.rgb[1] = b.g[i]; p.rgb[2] = b.b[i]; }
         p.scan = b.scan.empty() ? 0 : b.scan[i];
         p.vid = static_cast<uint32_t>(b.firstIndex + i);
-        nodes_[i] = nodeOf(p.q);
+        chunkOf_[i] = nodeOf(p.q);
       }
     });
     for (size_t i = 0; i < m; ++i)
-      if (nodes_[i] != kSkipped) SA_RETURN_IF_ERROR(files_.add(nodes_[i], recs_[i]));
+      if (chunkOf_[i] != kSkipped) SA_RETURN_IF_ERROR(files_.add(chunkOf_[i], recs_[i]));
     seen_ += m;
     if (progress_) progress_("distribute", plan_ ? total_ / 2 + seen_ / 2 : seen_, total_);
     return Status::ok();
@@ -541,7 +541,7 @@ class DistributeSink : public BatchSink {
   }
   static constexpr uint64_t kSkipped = UINT64_MAX;  // a NaN or infinite point: no node
   std::vector<ChunkPoint> recs_;
-  std::vector<uint64_t> nodes_;
+  std::vector<uint64_t> chunkOf_;
   // The chunk node a point goes to: the plan's chunk holding it, else its node at the start level.
   uint64_t nodeOf(const uint32_t q[3]) const { return plan_ ? plan_->nodeOf(q) : nodeId(level_, keyAt(q, level_)); }
   const Quantizer& qz_;
