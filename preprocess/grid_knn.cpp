@@ -79,10 +79,8 @@ void sortKeyed(std::vector<std::pair<uint64_t, uint32_t>>& keyed) {
 
 }  // namespace
 
-double GridKnn::cellFor(double spacing, int k) { return 1.3 * spacing * std::sqrt(std::max(k, 1) / M_PI); }
-
-GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell), sortedPos_(nullptr) {
-  using Box = std::array<double, 6>;  // lo, hi: min and max are exact in any order
+void pointBounds(const double* pos, size_t n, double lo[3], double hi[3]) {
+  using Box = std::array<double, 6>;  // lo, hi
   const double inf = std::numeric_limits<double>::infinity();
   const Box box = tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, n, 1 << 15), Box{inf, inf, inf, -inf, -inf, -inf},
@@ -95,8 +93,14 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
         for (int k = 0; k < 3; ++k) a[k] = std::min(a[k], b[k]), a[3 + k] = std::max(a[3 + k], b[3 + k]);
         return a;
       });
+  for (int a = 0; a < 3; ++a) lo[a] = box[a], hi[a] = box[3 + a];
+}
+
+double GridKnn::cellFor(double spacing, int k) { return 1.3 * spacing * std::sqrt(std::max(k, 1) / M_PI); }
+
+GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), cell_(cell), sortedPos_(nullptr) {
   double hi[3];
-  for (int a = 0; a < 3; ++a) lo_[a] = box[a], hi[a] = box[3 + a];
+  pointBounds(pos, n, lo_, hi);
   double extent = 0;
   for (int a = 0; a < 3; ++a) extent = n ? std::max(extent, hi[a] - lo_[a]) : 0;
   if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;

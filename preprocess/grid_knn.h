@@ -17,6 +17,10 @@
 
 namespace sa {
 
+// The bounds of n xyz-interleaved points, on every core (min and max are exact in any order);
+// lo = +inf, hi = -inf when n is 0.
+void pointBounds(const double* pos, size_t n, double lo[3], double hi[3]);
+
 class GridKnn {
  public:
   // pos: n xyz-interleaved points (kept by reference: must outlive the index). cell: the grid's

@@ -6,7 +6,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
@@ -530,20 +529,10 @@ Spacing estimateSpacing(const double* pos, size_t n, size_t samples) {
     // Spacing is local: take a few sub-cubes holding about kMaxTree / 4 points each (at full
     // density, so regular scan grids keep their true spacing), and query only points away
     // from the sub-cube's faces.
-    const tbb::blocked_range<size_t> all(0, n, 1 << 15);
-    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
-    const Box box = tbb::parallel_reduce(
-        all, Box(Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)),
-        [&](const tbb::blocked_range<size_t>& r, Box b) {
-          for (size_t i = r.begin(); i != r.end(); ++i) {
-            b.first = b.first.cwiseMin(Eigen::Vector3d(&pos[3 * i]));
-            b.second = b.second.cwiseMax(Eigen::Vector3d(&pos[3 * i]));
-          }
-          return b;
-        },
-        [](const Box& a, const Box& b) { return Box(a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)); });
+    double lo[3], hi[3];
+    pointBounds(pos, n, lo, hi);
     const size_t want = kMaxTree / 4;
-    double side = (box.second - box.first).maxCoeff() * std::sqrt(double(want) / double(n));  // surfaces: area ~ side^2
+    double side = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}) * std::sqrt(double(want) / double(n));  // surfaces: area ~ side^2
     // The sub-cubes one after the other (each starts from the side the one before settled on),
     // then their distances on every core, appended in order.
     std::vector<double> sub[4];
