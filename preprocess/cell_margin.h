@@ -33,7 +33,8 @@ class MarginFinder {
   // averaged with weights (1 - (d/radius)^2)^2 over every point within `radius` (3-D) whose
   // normal agrees with hints[i] (dot > 0.5). A function of position only: two cells asking at
   // the same place get the same normal, so shading is continuous across their border. Where no
-  // point is near, out[i] = hints[i].
+  // point is near, out[i] = hints[i]. The weighted sums are exact (fixed point), so the result
+  // does not depend on the order in which the points are found.
   //
   // With `tile`, the points are texel centres of one tile (on its surface, at the texels the
   // tile names): the chunk's points near the tile are then gathered once and binned by texel,
@@ -49,8 +50,6 @@ class MarginFinder {
                    const TexelFrame* tile = nullptr) const;
 
  private:
-  // One texel's field from the points within its radius, ascending (d2, index).
-  void fieldAt(const std::pair<double, uint32_t>* near, size_t count, double r2, const float* hint, float* out) const;
   void tileField(const double* xyz, const float* hints, size_t m, double radius, float* out, const TexelFrame& tile) const;
 
   struct Index;

@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstring>
+#include <algorithm>
 #include <random>
 
 namespace sa {
@@ -69,6 +70,60 @@ TEST(MarginFinder, TileFieldEqualsTheFieldQueriedPerTexel) {
   }
   EXPECT_EQ(differ, 0u);
   EXPECT_GT(moved, m) << "the field is not just the hints";
+}
+
+// The field's sums are exact: the same points in another order (another grid, another bin
+// order) give the same bits, and the normal is the weighted mean a plain double sum gives.
+TEST(MarginFinder, FieldIsTheWeightedMeanInAnyOrder) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<double> pos;
+  std::vector<float> nrm;
+  for (int i = 0; i < 4000; ++i) {
+    const double a = u(rng), b = u(rng);
+    pos.insert(pos.end(), {a, b, 0.05 * std::sin(6 * a + 3 * b)});
+    Eigen::Vector3d n(0.4 * (u(rng) - 0.5), 0.4 * (u(rng) - 0.5), i % 7 ? 1.0 : -1.0);
+    n.normalize();
+    nrm.insert(nrm.end(), {float(n.x()), float(n.y()), float(n.z())});
+  }
+  const size_t n = pos.size() / 3;
+  std::vector<uint32_t> perm(n);
+  for (uint32_t i = 0; i < n; ++i) perm[i] = i;
+  std::shuffle(perm.begin(), perm.end(), rng);
+  std::vector<double> pos2(pos.size());
+  std::vector<float> nrm2(nrm.size());
+  for (size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) pos2[3 * i + a] = pos[3 * perm[i] + a], nrm2[3 * i + a] = nrm[3 * perm[i] + a];
+  std::vector<double> xyz;
+  std::vector<float> hints;
+  for (int i = 0; i < 300; ++i) {
+    const double a = u(rng), b = u(rng);
+    xyz.insert(xyz.end(), {a, b, 0.05 * std::sin(6 * a + 3 * b)});
+    hints.insert(hints.end(), {0.f, 0.f, 1.f});
+  }
+  const size_t m = xyz.size() / 3;
+  const double radius = 0.05;
+  std::vector<float> one(3 * m), two(3 * m);
+  MarginFinder(pos.data(), nrm.data(), n).normalField(xyz.data(), hints.data(), m, radius, one.data());
+  MarginFinder(pos2.data(), nrm2.data(), n, 0.013).normalField(xyz.data(), hints.data(), m, radius, two.data());
+  EXPECT_EQ(std::memcmp(one.data(), two.data(), one.size() * sizeof(float)), 0);
+  double worst = 0;
+  size_t moved = 0;
+  for (size_t k = 0; k < m; ++k) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (size_t j = 0; j < n; ++j) {
+      const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * j]) - Eigen::Vector3d(&xyz[3 * k]);
+      const Eigen::Vector3d nn(nrm[3 * j], nrm[3 * j + 1], nrm[3 * j + 2]);
+      const double q = 1 - d.squaredNorm() / (radius * radius);
+      if (q > 0 && nn.z() > 0.5) sum += q * q * nn;
+    }
+    ASSERT_GT(sum.norm(), 0);
+    sum.normalize();
+    worst = std::max(worst, (sum - Eigen::Vector3d(one[3 * k], one[3 * k + 1], one[3 * k + 2]).cast<double>()).norm());
+    moved += std::abs(one[3 * k + 2] - 1.f) > 1e-4f;
+  }
+  EXPECT_LT(worst, 1e-6);
+  EXPECT_GT(moved, m / 2) << "the field is not just the hints";
 }
 
 }  // namespace
