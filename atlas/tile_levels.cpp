@@ -203,14 +203,14 @@ TileImage coarserLevel(const TileImage& s) {
         t.cover[o] = 0;
         continue;
       }
-      t.heights[o] = uint16_t(std::clamp(std::lround(h / covered), 1L, 65535L));
+      t.heights[o] = uint16_t(std::clamp(lroundNonNegative(h / covered), 1L, 65535L));
       if (nn) {
         const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         if (len > 0) encodeNormal(n[0] / len, n[1] / len, n[2] / len, &t.normals[o * kNormalBytes]);
         else std::copy_n(&s.normals[at(s, int(a.first), int(b.first)) * kNormalBytes], kNormalBytes, &t.normals[o * kNormalBytes]);
       }
       if (cc)
-        for (int q = 0; q < 4; ++q) t.rgba[o * 4 + q] = uint8_t(std::lround(c[q] / covered));
+        for (int q = 0; q < 4; ++q) t.rgba[o * 4 + q] = uint8_t(lroundNonNegative(c[q] / covered));
     }
   fillGutter(t, nn, cc);
   return t;

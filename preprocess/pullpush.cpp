@@ -394,7 +394,7 @@ void pullPushTile(const TileGrid& g, const TileSamples& s, const SplatOptions& o
     ++out.covered;
     const float* a = L.attr.data() + t * C;  // C may be 0: no attribute channels
     if (ch.color >= 0) {
-      for (int k = 0; k < 3; ++k) out.rgba[4 * t + k] = static_cast<uint8_t>(std::clamp(std::lround(a[ch.color + k]), 0L, 255L));
+      for (int k = 0; k < 3; ++k) out.rgba[4 * t + k] = static_cast<uint8_t>(std::clamp(lroundNonNegative(a[ch.color + k]), 0L, 255L));
       out.rgba[4 * t + 3] = 255;
     }
     if (ch.normal >= 0) {

@@ -3,7 +3,9 @@
 // past its tolerance.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "atlas/pack_format.h"
@@ -287,6 +289,25 @@ TEST(TileLevels, DamagedStoredLevelsAreErrors) {
     bad[k] ^= 0x5a;
     (void)decodeStoredLevel(bad, 64, 48, l, true, true, got);
   }
+}
+
+// The normal encoder's rounding is std::round's: at and beside every half, at the largest
+// double below one half, on random values, and (through std::round) outside its range.
+TEST(PackFormat, RoundNonNegativeIsStdRound) {
+  std::vector<double> v = {0.0, 0.49999999999999994, 0.5, 1.5, 2.5, 1023.5, 4503599627370495.5, 4503599627370496.0,
+                           -0.5, -2.5, 1e300, std::numeric_limits<double>::infinity()};
+  for (int k = 0; k <= 2048; ++k) {
+    const double h = k + 0.5;
+    v.insert(v.end(), {h, std::nextafter(h, 0.0), std::nextafter(h, 1e9), double(k)});
+  }
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(0, 1100);
+  for (int k = 0; k < 100000; ++k) v.push_back(u(rng));
+  for (const double x : v) {
+    EXPECT_EQ(roundNonNegative(x), std::round(x)) << x;
+    if (std::abs(x) < 1e18) EXPECT_EQ(lroundNonNegative(x), std::lround(x)) << x;
+  }
+  EXPECT_TRUE(std::isnan(roundNonNegative(std::nan(""))));
 }
 
 }  // namespace
