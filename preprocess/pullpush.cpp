@@ -109,12 +109,14 @@ std::vector<uint8_t> coverage3d(const TileGrid& g, const TileSamples& s, const s
       const double half = std::sqrt(span) * ru;  // the disk's half-width on this row
       const int x0 = std::max(0, static_cast<int>(std::ceil(fx - half)));
       const int x1 = std::min(W - 1, static_cast<int>(std::floor(fx + half)));
-      const double dv2 = std::pow((y - fy) * g.dv, 2);
+      const double dv2 = std::pow((y - fy) * g.dv, 2), wi = s.w[i];
+      // Branch-free, so the compiler codes it in vector lanes: a covered texel stays covered,
+      // and a NaN surface (no height there) fails the comparison.
+      uint8_t* row = &covered[size_t(y) * W];
+      const double* srow = &surface[size_t(y) * W];
       for (int x = x0; x <= x1; ++x) {
-        const size_t t = size_t(y) * W + x;
-        if (covered[t] || std::isnan(surface[t])) continue;
-        const double dh = surface[t] - s.w[i];
-        covered[t] = std::pow((x - fx) * g.du, 2) + dv2 + dh * dh <= r2;
+        const double dh = srow[x] - wi, du = (x - fx) * g.du;
+        row[x] |= uint8_t(du * du + dv2 + dh * dh <= r2);
       }
     }
   }
