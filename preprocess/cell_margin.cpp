@@ -83,47 +83,11 @@ struct FieldSum {
   }
 };
 
-// The same terms two points at a time (GCC's vector extension; each lane computes what add
-// computes, in the same order): the points [a0, a1) of per-axis arrays.
-typedef double V2 __attribute__((vector_size(16)));
-typedef long long M2 __attribute__((vector_size(16)));
-
-inline V2 load2(const double* p) {
-  V2 v;
-  __builtin_memcpy(&v, p, sizeof v);
-  return v;
-}
-
-void addRange(const double* ax, const double* ay, const double* az, const double* nx, const double* ny, const double* nz,
-              uint32_t a0, uint32_t a1, const double* q, double inv, const double* h, FieldSum& sum) {
-  const V2 qx = {q[0], q[0]}, qy = {q[1], q[1]}, qz = {q[2], q[2]}, hx = {h[0], h[0]}, hy = {h[1], h[1]}, hz = {h[2], h[2]};
-  const V2 one = {1, 1}, zero = {0, 0}, half = {0.5, 0.5}, fix = {kFieldFix, kFieldFix}, rnd = {kRound, kRound}, iv = {inv, inv};
-  V2 sx = zero, sy = zero, sz = zero;
-  uint32_t a = a0;
-  for (; a + 2 <= a1; a += 2) {
-    const V2 dx = load2(ax + a) - qx, dy = load2(ay + a) - qy, dz = load2(az + a) - qz;
-    const V2 d2 = dx * dx + dy * dy + dz * dz;
-    const V2 px = load2(nx + a), py = load2(ny + a), pz = load2(nz + a);
-    const V2 qq = one - d2 * iv, w = qq * qq * fix;
-    const M2 keep = (qq > zero) & (px * hx + py * hy + pz * hz > half);
-    sx += (V2)(keep & (M2)((w * px + rnd) - rnd));
-    sy += (V2)(keep & (M2)((w * py + rnd) - rnd));
-    sz += (V2)(keep & (M2)((w * pz + rnd) - rnd));
-  }
-  sum.x += sx[0] + sx[1], sum.y += sy[0] + sy[1], sum.z += sz[0] + sz[1];
-  for (; a < a1; ++a) {
-    const double dx = ax[a] - q[0], dy = ay[a] - q[1], dz = az[a] - q[2];
-    sum.add(dx * dx + dy * dy + dz * dz, inv, nx[a], ny[a], nz[a], h);
-  }
-}
-
 }  // namespace
 
-void MarginFinder::normalField(const double* xyz, const float* hints, size_t m, double radius, float* out,
-                               const TexelFrame* tile) const {
+void MarginFinder::normalField(const double* xyz, const float* hints, size_t m, double radius, float* out) const {
   std::copy(hints, hints + 3 * m, out);
   if (!index_ || m == 0) return;
-  if (tile && radius > 0 && tile->du > 0 && tile->dv > 0) return tileField(xyz, hints, m, radius, out, *tile);
   const double inv = 1 / (radius * radius);
   std::vector<std::pair<double, uint32_t>> near;
   for (size_t i = 0; i < m; ++i) {
@@ -138,22 +102,27 @@ void MarginFinder::normalField(const double* xyz, const float* hints, size_t m, 
   }
 }
 
-// A point within the radius of a texel's centre is within it in the tile's plane and along its
-// normal too: it lies in the tile's height range grown by the radius, in a bin (a square of
-// texels about the radius wide, the grid extended past the tile) that the texel's square of side
-// twice the radius meets. Both tests carry slack for rounding; what a texel keeps is decided by
-// the distance computed as GridKnn::within computes it.
-void MarginFinder::tileField(const double* xyz, const float* hints, size_t m, double radius, float* out,
-                             const TexelFrame& tile) const {
-  const double inv = 1 / (radius * radius);
-  // The texel centres' box in the frame.
+// Each of the chunk's points near the tile adds its term to the texels it can reach, instead of
+// each texel looking for its points: a point within the radius of a texel's surface point is
+// within it in the tile's plane and along its normal too, so it lies in the tile's height range
+// grown by the radius and the texel's centre lies in the point's square of side twice the radius
+// (both tests with slack for rounding). Whether it counts is decided by the distance computed as
+// GridKnn::within computes it, and the exact sums make the order of the terms irrelevant.
+void MarginFinder::tileField(const TexelFrame& tile, double radius, TileTexels& t) const {
+  if (!index_ || !(radius > 0) || !(tile.du > 0) || !(tile.dv > 0) || tile.width <= 0 || tile.height <= 0) return;
+  const int W = tile.width, H = tile.height;
+  const size_t n = size_t(W) * size_t(H);
+  auto covered = [&](size_t k) { return t.hx[k] != 0 || t.hy[k] != 0 || t.hz[k] != 0; };
+  // The covered texels' box in the frame.
   const Eigen::Vector3d w = tile.u.cross(tile.v);
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (size_t k = 0; k < m; ++k) {
-    const Eigen::Vector3d d = Eigen::Vector3d(&xyz[3 * k]) - tile.origin;
+  for (size_t k = 0; k < n; ++k) {
+    if (!covered(k)) continue;
+    const Eigen::Vector3d d = Eigen::Vector3d(t.x[k], t.y[k], t.z[k]) - tile.origin;
     const Eigen::Vector3d f(d.dot(tile.u), d.dot(tile.v), d.dot(w));
     lo = lo.cwiseMin(f), hi = hi.cwiseMax(f);
   }
+  if (!(lo.x() <= hi.x())) return;  // nothing covered
   // The world box around the frame's box grown by the radius (and a little for rounding).
   const double grow = radius * (1 + 1e-6) + 1e-6 * (tile.du + tile.dv);
   Eigen::Vector3d wlo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), whi = -wlo;
@@ -165,53 +134,52 @@ void MarginFinder::tileField(const double* xyz, const float* hints, size_t m, do
   wlo.array() -= grow, whi.array() += grow;
   std::vector<uint32_t> cand;
   index_->grid.cellsMeeting(wlo.data(), whi.data(), cand);
-  // Bins: squares of S x S texels, S about the radius, with P bins past the tile on every side.
-  const double su = std::max(1.0, std::floor(radius / tile.du)) * tile.du, sv = std::max(1.0, std::floor(radius / tile.dv)) * tile.dv;
-  const int64_t Pu = int64_t(std::ceil(radius / su)) + 1, Pv = int64_t(std::ceil(radius / sv)) + 1;
-  const int64_t BW = int64_t(std::ceil(tile.width * tile.du / su)) + 2 * Pu, BH = int64_t(std::ceil(tile.height * tile.dv / sv)) + 2 * Pv;
-  std::vector<int64_t> binOf(cand.size(), -1);
-  std::vector<uint32_t> start(size_t(BW * BH) + 1, 0);
-  for (size_t c = 0; c < cand.size(); ++c) {
-    const Eigen::Vector3d d = Eigen::Vector3d(&pos_[3 * size_t(cand[c])]) - tile.origin;
+  const double inv = 1 / (radius * radius);
+  std::vector<double> sx(n, 0.0), sy(n, 0.0), sz(n, 0.0);
+  // The texels whose centres u0 + (i + 0.5) du lie within c -+ radius (a hundredth of a texel of
+  // slack), clamped to the tile; false when none.
+  auto range = [&](double c, double u0, double du, int count, int& i0, int& i1) {
+    const double a = std::ceil((c - radius - u0) / du - 0.5 - 0.01), b = std::floor((c + radius - u0) / du - 0.5 + 0.01);
+    if (!(a <= b && b >= 0 && a <= double(count - 1))) return false;
+    i0 = a < 0 ? 0 : int(a);
+    i1 = b > double(count - 1) ? count - 1 : int(b);
+    return true;
+  };
+  constexpr size_t kAhead = 8;  // the candidates lie all over the chunk: their loads are fetched ahead
+  for (size_t a = 0; a < cand.size(); ++a) {
+    if (a + kAhead < cand.size()) {
+      __builtin_prefetch(&pos_[3 * size_t(cand[a + kAhead])]);
+      __builtin_prefetch(&nrm_[3 * size_t(cand[a + kAhead])]);
+    }
+    const uint32_t c = cand[a];
+    const double* p = &pos_[3 * size_t(c)];
+    const Eigen::Vector3d d = Eigen::Vector3d(p) - tile.origin;
     const double pw = d.dot(w);
     if (!(pw >= lo.z() - grow && pw <= hi.z() + grow)) continue;  // off the tile's heights
-    const double bu = std::floor((d.dot(tile.u) - tile.u0) / su) + double(Pu), bv = std::floor((d.dot(tile.v) - tile.v0) / sv) + double(Pv);
-    if (!(bu >= 0 && bv >= 0 && bu < double(BW) && bv < double(BH))) continue;
-    binOf[c] = int64_t(bv) * BW + int64_t(bu);
-    ++start[size_t(binOf[c]) + 1];
-  }
-  for (size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
-  // Each bin's points and their positions side by side, one array per axis (a texel reads a
-  // row of bins in turn, its distances in one loop the compiler vectorizes).
-  std::vector<uint32_t> binned(start.back()), fill(start.begin(), start.end() - 1);
-  std::vector<double> ax(binned.size()), ay(binned.size()), az(binned.size()), nx(binned.size()), ny(binned.size()),
-      nz(binned.size());
-  for (size_t c = 0; c < cand.size(); ++c)
-    if (binOf[c] >= 0) {
-      const uint32_t slot = fill[size_t(binOf[c])]++;
-      binned[slot] = cand[c];
-      const double* p = &pos_[3 * size_t(cand[c])];
-      ax[slot] = p[0], ay[slot] = p[1], az[slot] = p[2];
-      const float* q = &nrm_[3 * size_t(cand[c])];
-      nx[slot] = q[0], ny[slot] = q[1], nz[slot] = q[2];
+    int i0, i1, j0, j1;
+    if (!range(d.dot(tile.u), tile.u0, tile.du, W, i0, i1) || !range(d.dot(tile.v), tile.v0, tile.dv, H, j0, j1)) continue;
+    const double px = p[0], py = p[1], pz = p[2];
+    const double nx = nrm_[3 * size_t(c)], ny = nrm_[3 * size_t(c) + 1], nz = nrm_[3 * size_t(c) + 2];
+    for (int j = j0; j <= j1; ++j) {
+      const size_t row = size_t(j) * size_t(W);
+      const double *X = &t.x[row], *Y = &t.y[row], *Z = &t.z[row];
+      const float *HX = &t.hx[row], *HY = &t.hy[row], *HZ = &t.hz[row];
+      double *SX = &sx[row], *SY = &sy[row], *SZ = &sz[row];
+      for (int i = i0; i <= i1; ++i) {  // FieldSum::add's terms
+        const double dx = px - X[i], dy = py - Y[i], dz = pz - Z[i];
+        const double q = 1 - (dx * dx + dy * dy + dz * dz) * inv, wt = q * q * kFieldFix;
+        const bool keep = (q > 0) & (nx * double(HX[i]) + ny * double(HY[i]) + nz * double(HZ[i]) > 0.5);
+        SX[i] += keep ? (wt * nx + kRound) - kRound : 0.0;
+        SY[i] += keep ? (wt * ny + kRound) - kRound : 0.0;
+        SZ[i] += keep ? (wt * nz + kRound) - kRound : 0.0;
+      }
     }
-  // A texel reads the bins its centre's square of side 2 radius meets (a hundredth of a bin of
-  // slack for rounding).
-  auto range = [](double c, double s, int64_t pad, int64_t n, double r, int64_t& b0, int64_t& b1) {
-    b0 = std::max<int64_t>(0, int64_t(std::floor((c - r) / s - 0.01)) + pad);
-    b1 = std::min<int64_t>(n - 1, int64_t(std::floor((c + r) / s + 0.01)) + pad);
-  };
-  for (size_t k = 0; k < m; ++k) {
-    const size_t ti = tile.texel[k] % size_t(tile.width), tj = tile.texel[k] / size_t(tile.width);
-    int64_t u0, u1, v0, v1;
-    range((double(ti) + 0.5) * tile.du, su, Pu, BW, radius, u0, u1);
-    range((double(tj) + 0.5) * tile.dv, sv, Pv, BH, radius, v0, v1);
-    const double h[3] = {hints[3 * k], hints[3 * k + 1], hints[3 * k + 2]};
-    FieldSum sum;
-    for (int64_t bj = v0; bj <= v1; ++bj)  // the distances as GridKnn::within computes them
-      addRange(ax.data(), ay.data(), az.data(), nx.data(), ny.data(), nz.data(), start[size_t(bj * BW + u0)],
-               start[size_t(bj * BW + u1) + 1], &xyz[3 * k], inv, h, sum);
-    sum.store(&out[3 * k]);
+  }
+  for (size_t k = 0; k < n; ++k) {
+    if (!covered(k)) continue;
+    float out[3] = {t.hx[k], t.hy[k], t.hz[k]};
+    FieldSum{sx[k], sy[k], sz[k]}.store(out);
+    t.hx[k] = out[0], t.hy[k] = out[1], t.hz[k] = out[2];
   }
 }
 

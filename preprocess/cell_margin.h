@@ -35,23 +35,26 @@ class MarginFinder {
   // the same place get the same normal, so shading is continuous across their border. Where no
   // point is near, out[i] = hints[i]. The weighted sums are exact (fixed point), so the result
   // does not depend on the order in which the points are found.
-  //
-  // With `tile`, the points are texel centres of one tile (on its surface, at the texels the
-  // tile names): the chunk's points near the tile are then gathered once and binned by texel,
-  // and each texel reads only the bins its radius reaches instead of querying the chunk's grid.
-  // The result is the same to the bit.
+  void normalField(const double* xyz, const float* hints, size_t m, double radius, float* out) const;
+
+  // The same field at the covered texels of one tile, given on its texel grid (width x height,
+  // row-major): x, y, z each texel's surface point (world), hx, hy, hz its hint, zero where the
+  // texel is not covered. The hints of the covered texels are replaced by the field, to the bit
+  // what normalField gives there. The chunk's points near the tile are gathered once and each
+  // adds its weight to the texels within its reach, instead of a grid query per texel.
   struct TexelFrame {
     Eigen::Vector3d origin, u, v;  // the tile's frame (u, v orthonormal)
     double u0, v0, du, dv;         // texel (i, j) has its centre at u0 + (i + 0.5) du, v0 + (j + 0.5) dv
     int width, height;
-    const size_t* texel;           // per point its texel, i + j * width
   };
-  void normalField(const double* xyz, const float* hints, size_t m, double radius, float* out,
-                   const TexelFrame* tile = nullptr) const;
+  struct TileTexels {
+    std::vector<double> x, y, z;
+    std::vector<float> hx, hy, hz;
+    explicit TileTexels(size_t n) : x(n, 0.0), y(n, 0.0), z(n, 0.0), hx(n, 0.f), hy(n, 0.f), hz(n, 0.f) {}
+  };
+  void tileField(const TexelFrame& tile, double radius, TileTexels& texels) const;
 
  private:
-  void tileField(const double* xyz, const float* hints, size_t m, double radius, float* out, const TexelFrame& tile) const;
-
   struct Index;
   const double* pos_;
   const float* nrm_;

@@ -940,25 +940,20 @@ constexpr double kFieldScale = 1.5;  // the field's radius over the splat radius
 
 void fieldNormals(const CellRecord& r, const TileGrid& g, const MarginFinder& margins, double radius, TileOutput& tile) {
   const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
-  std::vector<size_t> texels;
-  std::vector<double> xyz;
-  std::vector<float> hints;
-  for (size_t t = 0; t < tile.heights.size(); ++t) {
-    if (!tile.heights[t]) continue;
-    const int i = static_cast<int>(t % size_t(g.width)), j = static_cast<int>(t / size_t(g.width));
-    const double h = decodeHeight(tile.heights[t], tile.wMin, tile.wMax);
+  MarginFinder::TileTexels t(tile.heights.size());
+  for (size_t k = 0; k < tile.heights.size(); ++k) {
+    if (!tile.heights[k]) continue;
+    const int i = static_cast<int>(k % size_t(g.width)), j = static_cast<int>(k / size_t(g.width));
+    const double h = decodeHeight(tile.heights[k], tile.wMin, tile.wMax);
     const Eigen::Vector3d x = O + U * (g.u0 + (i + 0.5) * g.du) + V * (g.v0 + (j + 0.5) * g.dv) + Wn * h;
     double n[3];
-    decodeNormal(&tile.normals[kNormalBytes * t], n);
-    texels.push_back(t);
-    xyz.insert(xyz.end(), {x.x(), x.y(), x.z()});
-    hints.insert(hints.end(), {float(n[0]), float(n[1]), float(n[2])});
+    decodeNormal(&tile.normals[kNormalBytes * k], n);
+    t.x[k] = x.x(), t.y[k] = x.y(), t.z[k] = x.z();
+    t.hx[k] = float(n[0]), t.hy[k] = float(n[1]), t.hz[k] = float(n[2]);
   }
-  std::vector<float> field(hints.size());
-  const MarginFinder::TexelFrame frame{O, U, V, g.u0, g.v0, g.du, g.dv, g.width, g.height, texels.data()};
-  margins.normalField(xyz.data(), hints.data(), texels.size(), radius, field.data(), &frame);
-  for (size_t k = 0; k < texels.size(); ++k)
-    encodeNormal(field[3 * k], field[3 * k + 1], field[3 * k + 2], &tile.normals[kNormalBytes * texels[k]]);
+  margins.tileField({O, U, V, g.u0, g.v0, g.du, g.dv, g.width, g.height}, radius, t);
+  for (size_t k = 0; k < tile.heights.size(); ++k)
+    if (tile.heights[k]) encodeNormal(t.hx[k], t.hy[k], t.hz[k], &tile.normals[kNormalBytes * k]);
 }
 
 // Past its own points (in the margin the neighbours' samples fill), a cell keeps only texels

@@ -1,5 +1,5 @@
-// MarginFinder::normalField with a tile's texel frame (the chunk's points binned by texel once
-// per tile) against the plain form (a grid query per texel): the same normals to the bit, on a
+// MarginFinder::tileField (the chunk's points near a tile gathered once, each adding its weight
+// to the texels it reaches) against normalField (a grid query per texel): the same normals to the bit, on a
 // tilted, curved, noisy sheet with a second layer just over a radius above it and texels past
 // the points' edge.
 #include "preprocess/cell_margin.h"
@@ -60,8 +60,17 @@ TEST(MarginFinder, TileFieldEqualsTheFieldQueriedPerTexel) {
   const size_t m = texels.size();
   std::vector<float> plain(3 * m), tiled(3 * m);
   mf.normalField(xyz.data(), hints.data(), m, radius, plain.data());
-  const MarginFinder::TexelFrame frame{O, U, V, 0.0, 0.0, du, dv, width, height_, texels.data()};
-  mf.normalField(xyz.data(), hints.data(), m, radius, tiled.data(), &frame);
+  MarginFinder::TileTexels grid(size_t(width) * height_);
+  for (size_t k = 0; k < m; ++k) {
+    const size_t t = texels[k];
+    grid.x[t] = xyz[3 * k], grid.y[t] = xyz[3 * k + 1], grid.z[t] = xyz[3 * k + 2];
+    grid.hx[t] = hints[3 * k], grid.hy[t] = hints[3 * k + 1], grid.hz[t] = hints[3 * k + 2];
+  }
+  mf.tileField({O, U, V, 0.0, 0.0, du, dv, width, height_}, radius, grid);
+  for (size_t k = 0; k < m; ++k) {
+    const size_t t = texels[k];
+    tiled[3 * k] = grid.hx[t], tiled[3 * k + 1] = grid.hy[t], tiled[3 * k + 2] = grid.hz[t];
+  }
   EXPECT_EQ(std::memcmp(plain.data(), tiled.data(), plain.size() * sizeof(float)), 0);
   size_t moved = 0, differ = 0;
   for (size_t k = 0; k < 3 * m; ++k) {
