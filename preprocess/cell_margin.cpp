@@ -56,9 +56,9 @@ namespace {
 
 // The field's sums exact: each term w * n is rounded to a multiple of 2^-26 (far below a float
 // normal's precision), so every partial sum of up to 2^27 terms is a double without rounding.
-// An exact sum is the same in any order: a texel that reads its tile's bins and a query that
-// reads the grid's cells get the same normal without sorting their points first, and a tile's
-// texels sum two points at a time.
+// An exact sum is the same in any order: a tile whose points add their terms to the texels they
+// reach (tileField) and a query that sums the points of the grid's cells (normalField) get the
+// same normal, and neither sorts its points first.
 constexpr double kFieldFix = 67108864.0;       // 2^26
 constexpr double kRound = 6755399441055744.0;  // 1.5 * 2^52: (x + kRound) - kRound rounds x to an integer
 
