@@ -537,8 +537,9 @@ Spacing estimateSpacing(const double* pos, size_t n, size_t samples) {
     // then their distances on every core, appended in order.
     std::vector<double> sub[4];
     double inner[4];
+    Eigen::Vector3d centre[4];
     for (int seed = 0; seed < 4; ++seed) {
-      const Eigen::Vector3d c(&pos[3 * ((2 * seed + 1) * n / 8)]);
+      const Eigen::Vector3d& c = centre[seed] = Eigen::Vector3d(&pos[3 * ((2 * seed + 1) * n / 8)]);
       for (int attempt = 0; attempt < 8; ++attempt) {
         pointsInCube(pos, n, c, side / 2, 4 * want + 1, sub[seed]);
         const size_t m = sub[seed].size() / 3;
@@ -550,7 +551,7 @@ Spacing estimateSpacing(const double* pos, size_t n, size_t samples) {
     }
     std::vector<double> ds[4], areas[4];
     tbb::parallel_for(0, 4, [&](int seed) {
-      const Eigen::Vector3d c(&pos[3 * ((2 * seed + 1) * n / 8)]);
+      const Eigen::Vector3d& c = centre[seed];
       const std::vector<double>& sb = sub[seed];
       nearestDistances(sb.data(), sb.size() / 3, samples / 4, [&](size_t a) {
         return ((Eigen::Vector3d(&sb[3 * a]) - c).cwiseAbs().array() <= inner[seed]).all();
