@@ -196,9 +196,17 @@ void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
   });
 }
 
+namespace {
+// (distance, index) pairs in ascending order, as std::pair's < orders them for distances that are
+// not NaN, without the three-way comparison's extra branches.
+bool nearer(const std::pair<double, uint32_t>& a, const std::pair<double, uint32_t>& b) {
+  return a.first < b.first || (a.first == b.first && a.second < b.second);
+}
+}  // namespace
+
 // The m = min(k, candidates) smallest (d2, index) of `from` into best (ascending) when at least m
 // lie within b2; false otherwise. The distances come first, in one loop the compiler vectorizes;
-// then a histogram of 32 buckets over [0, b2] (or over [0, the farthest] for an unbounded ask)
+// then a histogram of 64 buckets over [0, b2] (or over [0, the farthest] for an unbounded ask)
 // finds the bucket of the m-th, and only the candidates up to that bucket are selected and
 // sorted. The selection was most of a query; on a surface the count grows with d2, so the
 // buckets hold about equally many and a query sorts about k + k / 10 instead of 3k. Exact: the
@@ -231,7 +239,10 @@ bool GridKnn::select(const double* p, Candidates& from, int k, double b2,
     nn += d2[j] <= b2;
   }
   if (nn < m) return false;  // fewer than m within b2
-  constexpr int kBuckets = 32;
+  // 64 buckets: about one candidate each on a surface, so that the kept ones reach the insertion
+  // sort below nearly in order and its loop mostly exits at once (with 32, two to a bucket in
+  // random order, its exits were most of the query's mispredicted branches).
+  constexpr int kBuckets = 64;
   const double scale = b2 > 0 ? kBuckets / b2 : 0;
   // Bucket of each (d2 <= b2: one at b2 itself, or a product rounded up to kBuckets, goes in
   // the last, which keeps the answer exact: only the buckets' order matters).
@@ -247,26 +258,28 @@ bool GridKnn::select(const double* p, Candidates& from, int k, double b2,
   int last = 0;  // the bucket the m-th lies in
   for (size_t sum = 0; last < kBuckets - 1; ++last)
     if ((sum += count[last]) >= m) break;
-  // The candidates up to that bucket, placed by bucket (a counting sort; one slot past them takes
-  // the rest), so that only the last bucket is selected from and the whole is nearly in order.
+  // The candidates up to that bucket, placed by bucket (a counting sort), so that only the last
+  // bucket is selected from and the whole is nearly in order. The buckets past it all write to
+  // one slot past the kept ones and never advance: no branch on whether a candidate is kept.
   uint32_t end[kBuckets];
-  for (int b = 0, at = 0; b < kBuckets; ++b) end[b] = uint32_t(at), at += b <= last ? int(count[b]) : 0;
-  const uint32_t kept = end[last] + count[last];
+  uint32_t kept = 0;
+  for (int b = 0; b <= last; ++b) end[b] = kept, kept += count[b];
+  for (int b = last + 1; b < kBuckets; ++b) end[b] = kept;
   best.resize(kept + 1);
-  for (size_t a = 0; a < nn; ++a) {  // branch-free: every candidate written, the kept ones advance
-    const uint32_t j = near[a], b = bk[a], in = b <= uint32_t(last);
-    best[in ? end[b] : kept] = {d2[j], from.index[j]};
-    end[b] += in;
+  for (size_t a = 0; a < nn; ++a) {
+    const uint32_t j = near[a], b = bk[a];
+    best[end[b]] = {d2[j], from.index[j]};
+    end[b] += b <= uint32_t(last);
   }
   const auto first = best.begin() + (end[last] - count[last]);
   best.resize(kept);
-  if (m < kept) std::nth_element(first, best.begin() + long(m - 1), best.end());
+  if (m < kept) std::nth_element(first, best.begin() + long(m - 1), best.end(), nearer);
   best.resize(m);
-  // Insertion sort: the buckets are in order, each holds a candidate or two on a surface.
+  // Insertion sort: the buckets are in order, each holds a candidate or none on a surface.
   for (size_t a = 1; a < m; ++a) {
     const std::pair<double, uint32_t> e = best[a];
     size_t b = a;
-    for (; b > 0 && e < best[b - 1]; --b) best[b] = best[b - 1];
+    for (; b > 0 && nearer(e, best[b - 1]); --b) best[b] = best[b - 1];
     best[b] = e;
   }
   return true;
