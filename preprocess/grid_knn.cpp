@@ -172,14 +172,25 @@ int64_t GridKnn::findCell(uint64_t key) const {
   return -1;
 }
 
+// A cell's key is the or of its coordinates' spread bits: each z and y is spread once per row, and
+// each x once per call where the rows are short (a block's three), not once per cell.
 template <class F>
 void GridKnn::forCells(const int64_t a[3], const int64_t b[3], F visit) const {
-  for (int64_t z = a[2]; z <= b[2]; ++z)
-    for (int64_t y = a[1]; y <= b[1]; ++y)
+  constexpr int64_t kRow = 16;
+  uint64_t sx[kRow];
+  const bool kept = b[0] - a[0] < kRow;
+  if (kept)
+    for (int64_t x = a[0]; x <= b[0]; ++x) sx[x - a[0]] = spread(uint64_t(x));
+  for (int64_t z = a[2]; z <= b[2]; ++z) {
+    const uint64_t kz = spread(uint64_t(z)) << 2;
+    for (int64_t y = a[1]; y <= b[1]; ++y) {
+      const uint64_t kyz = kz | spread(uint64_t(y)) << 1;
       for (int64_t x = a[0]; x <= b[0]; ++x) {
-        const int64_t ci = findCell(keyOf(x, y, z));
+        const int64_t ci = findCell(kyz | (kept ? sx[x - a[0]] : spread(uint64_t(x))));
         if (ci >= 0) visit(cells_[size_t(ci)]);
       }
+    }
+  }
 }
 
 void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
