@@ -107,10 +107,12 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   // centroid, coordinates scaled by h (conditioning).
   const double h = ls.radius;
   alignas(16) double xyz[3 * 64];  // (x, y, z) in that frame, per neighbour
-  // A += w f f^T and b += w f z in plain row-major arrays: each entry is its own sum, so the
-  // compiler codes a row's six in vector lanes (Eigen's column-major A(r, q) stayed scalar). The
-  // lower triangle is what the solve reads; each of its entries is summed exactly as before.
-  alignas(16) double a[6][6] = {}, bb[6] = {};
+  // A += w f f^T and b += w f z, the lower triangle only (what the solve reads), in pairs of
+  // lanes (GCC's vector extension; SSE2 codes a pair to an instruction): row r of A holds
+  // f[r] w f[0..r], in r / 2 + 1 pairs (the lane past an even row's last entry is summed and not
+  // read). Each entry is the same sum of the same products as one scalar at a time, in the same
+  // order. (The compiler's own vectorization of the square form took 73 instructions a neighbour.)
+  using V2 = double __attribute__((vector_size(16)));
   for (int j = 0; j < cnt; ++j) {
     const Eigen::Vector3d& dj = d[size_t(j)];
     xyz[3 * j] = dj.dot(u), xyz[3 * j + 1] = dj.dot(v), xyz[3 * j + 2] = dj.dot(n);
@@ -118,21 +120,23 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   // The divisions by h in one loop over the coordinates, which the compiler codes two to an
   // instruction (three scalar divisions a neighbour were a seventh of the fit).
   for (int t = 0; t < 3 * cnt; ++t) xyz[t] /= h;
+  V2 a[6][3] = {}, bb[3] = {};  // a[r][p]: entries (r, 2p) and (r, 2p + 1); bb[p]: b's 2p, 2p + 1
   for (int j = 0; j < cnt; ++j) {
-    const double x = xyz[3 * j], y = xyz[3 * j + 1], z = xyz[3 * j + 2];
-    alignas(16) const double f[6] = {1, x, y, x * x, x * y, y * y};
-    const double w = wt[size_t(j)];
+    const double x = xyz[3 * j], y = xyz[3 * j + 1], z = xyz[3 * j + 2], w = wt[size_t(j)];
+    const V2 f[3] = {V2{1, x}, V2{y, x * x}, V2{x * y, y * y}};
+    const V2 wv = {w, w}, zv = {z, z};
+    const V2 wf[3] = {wv * f[0], wv * f[1], wv * f[2]};  // w f[0..5]
+    for (int p = 0; p < 3; ++p) bb[p] += wf[p] * zv;
     for (int r = 0; r < 6; ++r) {
-      const double wf = w * f[r];
-      for (int q = 0; q < 6; ++q) a[r][q] += wf * f[q];
-      bb[r] += wf * z;
+      const V2 wr = {wf[r / 2][r % 2], wf[r / 2][r % 2]};
+      for (int p = 0; p <= r / 2; ++p) a[r][p] += wr * f[p];
     }
   }
   Eigen::Matrix<double, 6, 6> A;
   Eigen::Matrix<double, 6, 1> b;
   for (int r = 0; r < 6; ++r) {
-    b[r] = bb[r];
-    for (int q = 0; q < 6; ++q) A(r, q) = q <= r ? a[r][q] : a[q][r];
+    b[r] = bb[r / 2][r % 2];
+    for (int q = 0; q < 6; ++q) A(r, q) = q <= r ? a[r][q / 2][q % 2] : a[q][r / 2][r % 2];
   }
   A.diagonal().array() += 1e-9 * A.trace();
   Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(A);
