@@ -153,6 +153,46 @@ TEST(TileCodec, UpsampleAveragesCoveredEvenNeighboursOnTheQuantum) {
   EXPECT_EQ(std::memcmp(&dst[0], &src[0], 4), 0);   // even texels copied
 }
 
+// upsampleEven against the plain formula, (2 sum + count q) / (2 count q) q, on random tiles with
+// holes (so that every count from 0 to 4 occurs) and values up to the top of their bytes, for
+// quanta that are powers of two (the multiply-and-shift path) and one that is not.
+TEST(TileCodec, UpsampleIsTheRoundedMeanForEveryCountAndQuantum) {
+  std::mt19937 rng(5);
+  for (const TexelLayout L : {kNormalTexels, kColorTexels, TexelLayout{1, 2, 1}, TexelLayout{3, 2, 3}, TexelLayout{2, 1, 8}}) {
+    const uint32_t w = 37, h = 29, top = L.bytes == 2 ? 0xffffu : 0xffu;
+    const size_t tb = size_t(L.texelBytes());
+    std::vector<uint8_t> src(size_t(w) * h * tb), cov(size_t(w) * h), dst(src.size());
+    std::uniform_int_distribution<uint32_t> value(0, top / L.quantum);
+    for (size_t k = 0; k < cov.size(); ++k) {
+      cov[k] = rng() % 4 != 0;
+      for (int c = 0; c < L.comps; ++c) setValue(&src[k * tb + size_t(c) * L.bytes], L.bytes, value(rng) * L.quantum);
+    }
+    upsampleEven(src.data(), cov.data(), w, h, L, dst.data());
+    size_t byCount[5] = {};
+    for (uint32_t j = 0; j < h; ++j)
+      for (uint32_t i = 0; i < w; ++i) {
+        const size_t k = size_t(j) * w + i;
+        if ((i % 2 == 0 && j % 2 == 0) || !cov[k]) continue;
+        for (int c = 0; c < L.comps; ++c) {
+          uint32_t sum = 0, count = 0;
+          for (int dj = -int(j % 2); dj <= int(j % 2); dj += 2)
+            for (int di = -int(i % 2); di <= int(i % 2); di += 2) {
+              const int x = int(i) + di, y = int(j) + dj;
+              if (x < 0 || y < 0 || x >= int(w) || y >= int(h) || !cov[size_t(y) * w + size_t(x)]) continue;
+              sum += valueAt(&src[(size_t(y) * w + size_t(x)) * tb + size_t(c) * L.bytes], L.bytes);
+              ++count;
+            }
+          if (c == 0) ++byCount[count];
+          uint32_t want = count ? (2 * sum + count * L.quantum) / (2 * count * L.quantum) * L.quantum : 0;
+          if (want > top) want -= L.quantum;
+          ASSERT_EQ(valueAt(&dst[k * tb + size_t(c) * L.bytes], L.bytes), want)
+              << "texel (" << i << ", " << j << ") component " << c << ", quantum " << L.quantum << ", count " << count;
+        }
+      }
+    for (int n = 0; n <= 4; ++n) EXPECT_GT(byCount[n], 0u) << "no texel averaged " << n << " neighbours";
+  }
+}
+
 TEST(TileCodec, DamagedPyramidBlobsAreErrors) {
   std::mt19937 rng(3);
   const uint32_t w = 20, h = 17;
@@ -305,7 +345,9 @@ TEST(PackFormat, RoundNonNegativeIsStdRound) {
   for (int k = 0; k < 100000; ++k) v.push_back(u(rng));
   for (const double x : v) {
     EXPECT_EQ(roundNonNegative(x), std::round(x)) << x;
-    if (std::abs(x) < 1e18) EXPECT_EQ(lroundNonNegative(x), std::lround(x)) << x;
+    if (std::abs(x) < 1e18) {
+      EXPECT_EQ(lroundNonNegative(x), std::lround(x)) << x;
+    }
   }
   EXPECT_TRUE(std::isnan(roundNonNegative(std::nan(""))));
 }
