@@ -3,6 +3,7 @@
 // enough (maxPointsPerChunk) to be processed in memory. Over-full chunks are re-split by
 // streaming their file into eight children.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -26,6 +27,23 @@ struct ChunkPoint {
   uint32_t vid;  // index of the point in its file (mesh vertex index for the triangle path)
 };
 static_assert(sizeof(ChunkPoint) == 36);
+
+// Fraction bits a normal component keeps in the chunk files between passes A and B: its low
+// mantissa bytes become zero and compress to nothing.
+constexpr int kChunkNormalBits = 15;
+
+// A normal component rounded to a multiple of 2^-kChunkNormalBits: the bits of
+// std::ldexp(std::nearbyint(std::ldexp(v, kChunkNormalBits)), -kChunkNormalBits) (every float
+// checked once) without three libm calls. Scaling by a power of two is exact here; adding and
+// subtracting 2^23 rounds a magnitude under 2^23 to the nearest integer, ties to even, as
+// nearbyint in the default rounding mode; copysign keeps nearbyint's sign (-0 for a small
+// negative). A magnitude past 2^23, infinities and NaN (not a unit normal's) take the calls.
+inline float roundToChunkNormal(float v) {
+  constexpr float kScale = float(1 << kChunkNormalBits), kBig = 8388608.0f;  // 2^23
+  const float a = std::abs(v) * kScale;
+  if (!(a < kBig)) return std::ldexp(std::nearbyint(std::ldexp(v, kChunkNormalBits)), -kChunkNormalBits);
+  return std::copysign((a + kBig) - kBig, v) / kScale;
+}
 
 // ChunkPoint::flags bits.
 enum ChunkFlags : uint8_t {

@@ -457,9 +457,6 @@ void mergeChunkCells(PackJob& job, uint32_t ci, const ChunkCells& c) {
   job.sum.layeredCells += c.layered;
 }
 
-// Fraction bits a normal component keeps in the chunk files between passes A and B.
-constexpr int kChunkNormalBits = 15;
-
 // Positions pass B reads of a point input keep 1/2^kChunkPositionBits of the chunk's sample
 // spacing (texels are about a spacing wide).
 constexpr int kChunkPositionBits = 10;
@@ -543,7 +540,7 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const size_t s = idx[i];
       sorted[i] = pts[s];
-      for (int a = 0; a < 3; ++a) sorted[i].n[a] = std::ldexp(std::nearbyint(std::ldexp(nrm[3 * s + a], kChunkNormalBits)), -kChunkNormalBits);
+      for (int a = 0; a < 3; ++a) sorted[i].n[a] = roundToChunkNormal(nrm[3 * s + a]);
       for (int a = 0; a < 3; ++a) sorted[i].q[a] = job.qz.encode(pos[3 * s + a], a);
       if (!job.triangles) sorted[i].vid = sorted[i].scan = 0;
     }

@@ -4,6 +4,7 @@
 // and a truncated, damaged or over-long file is an error naming it, never points made up.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -32,6 +33,37 @@ std::vector<ChunkPoint> scanLikePoints(size_t n) {
     p.vid = uint32_t(i);
   }
   return v;
+}
+
+// roundToChunkNormal against the libm form it replaces, bit for bit: a spread of every float's
+// bit patterns (both signs, subnormals to infinities), and the values around each tie in [-1, 1].
+TEST(ChunkNormal, RoundingIsTheLibmFormBitForBit) {
+  auto libm = [](float v) { return std::ldexp(std::nearbyint(std::ldexp(v, kChunkNormalBits)), -kChunkNormalBits); };
+  auto bitsOf = [](float v) {
+    uint32_t u;
+    std::memcpy(&u, &v, 4);
+    return u;
+  };
+  auto check = [&](float v) {
+    const float want = libm(v), got = roundToChunkNormal(v);
+    if (std::isnan(want)) {
+      EXPECT_TRUE(std::isnan(got)) << v;
+    } else {
+      ASSERT_EQ(bitsOf(got), bitsOf(want)) << v;
+    }
+  };
+  for (uint64_t b = 0; b < (1ull << 32); b += 4099) {
+    const uint32_t u = uint32_t(b);
+    float v;
+    std::memcpy(&v, &u, 4);
+    check(v);
+  }
+  const float step = std::ldexp(1.0f, -kChunkNormalBits);
+  for (int k = -(1 << kChunkNormalBits); k < (1 << kChunkNormalBits); k += 7) {
+    const float tie = (float(k) + 0.5f) * step;
+    for (const float v : {tie, std::nextafter(tie, -2.0f), std::nextafter(tie, 2.0f), float(k) * step}) check(v);
+  }
+  for (const float v : {0.0f, -0.0f, 1e-40f, -1e-40f, 1.0f, -1.0f, 3e38f, -INFINITY, INFINITY, NAN}) check(v);
 }
 
 TEST(ChunkFile, RoundTripsExactlyAndIsSmallerThanItsRecords) {
