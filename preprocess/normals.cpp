@@ -1,5 +1,6 @@
 #include "preprocess/normals.h"
 
+#include "preprocess/fit_math.h"
 #include "preprocess/grid_knn.h"
 
 #include <flann/flann.hpp>
@@ -48,41 +49,6 @@ struct LocalSurface {
 // 24 random neighbours, about 0.1.
 constexpr double kEdgeOffset = 0.25;
 
-// Solves A c = b for a symmetric positive definite 6x6 A given by its lower triangle, by LDL^T
-// without pivoting (stable for such a matrix: every pivot is positive). False where a pivot is
-// not positive or the solution not finite. Written out for the quadric's normal equations, which
-// the ridge keeps positive definite: Eigen's pivoting LDLT was 5 % of a pack's instructions and
-// 9 % of its mispredicted branches.
-bool solveSpd6(const double A[6][6], const double b[6], double c[6]) {
-  double L[6][6], LD[6][6], D[6];  // L unit lower triangular; LD[i][k] = L[i][k] D[k]
-  for (int j = 0; j < 6; ++j) {
-    double d = A[j][j];
-    for (int k = 0; k < j; ++k) d -= LD[j][k] * L[j][k];
-    if (!(d > 0)) return false;
-    D[j] = d;
-    for (int i = j + 1; i < 6; ++i) {
-      double v = A[i][j];
-      for (int k = 0; k < j; ++k) v -= LD[i][k] * L[j][k];
-      LD[i][j] = v;
-      L[i][j] = v / d;
-    }
-  }
-  double y[6];
-  for (int i = 0; i < 6; ++i) {
-    double v = b[i];
-    for (int k = 0; k < i; ++k) v -= L[i][k] * y[k];
-    y[i] = v;
-  }
-  for (int i = 5; i >= 0; --i) {
-    double v = y[i] / D[i];
-    for (int k = i + 1; k < 6; ++k) v -= L[k][i] * c[k];
-    c[i] = v;
-  }
-  for (int i = 0; i < 6; ++i)
-    if (!std::isfinite(c[i])) return false;
-  return true;
-}
-
 LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* ind, const double* dist2, int k) {
   LocalSurface ls;
   // The neighbours relative to p, gathered once (each pass below reads them again).
@@ -103,11 +69,12 @@ LocalSurface fitLocal(const double* pos, const Eigen::Vector3d& p, const int* in
   if (!(h2 > 0)) return ls;
   ls.radius = std::sqrt(h2);
   if (cnt < 3) return ls;
-  // Weights exp(-d^2 / h^2) with h the neighbourhood radius (PCL's default Gaussian).
+  // Weights exp(-d^2 / h^2) with h the neighbourhood radius (PCL's default Gaussian), by
+  // gaussianWeight in a loop of its own, which the compiler codes two weights to an instruction.
+  for (int j = 0; j < cnt; ++j) wt[size_t(j)] = gaussianWeight(wt[size_t(j)] / h2);
   double wsum = 0;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (int j = 0; j < cnt; ++j) {
-    wt[size_t(j)] = std::exp(-wt[size_t(j)] / h2);
     wsum += wt[size_t(j)];
     mean += wt[size_t(j)] * d[size_t(j)];
   }
