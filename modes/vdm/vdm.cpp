@@ -258,7 +258,7 @@ uint16_t halfBits(float x) {
 
 float halfValue(uint16_t b) {
   Eigen::half h;
-  std::memcpy(&h, &b, 2);
+  std::memcpy(static_cast<void*>(&h), &b, 2);  // Eigen::half holds the 16 bits and nothing else
   return float(h);
 }
 

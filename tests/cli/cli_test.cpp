@@ -48,7 +48,7 @@ CmdResult run(const std::string& args) {
   size_t n;
   while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
   const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, {}};
 }
 
 // As run, also capturing stderr (into a file beside the binary's temp dir).
@@ -352,7 +352,9 @@ TEST(Cli, ModesBakeInfoBenchAndFallback) {
   ASSERT_EQ(run("bake " + d.file("g.hfa") + " --mode gdm -q").code, 0);
   auto gj = nlohmann::json::parse(run("info " + d.file("g.hfa") + " --json").out);
   for (const auto& m : gj["modes"])
-    if (m["mode"] == "gdm" || m["mode"] == "exact") EXPECT_TRUE(m["present"].get<bool>()) << m.dump();
+    if (m["mode"] == "gdm" || m["mode"] == "exact") {
+      EXPECT_TRUE(m["present"].get<bool>()) << m.dump();
+    }
   EXPECT_EQ(run("verify " + d.file("g.hfa")).code, 0);
   // --gdm-elsewhere parallax: gdm's height-field cells march, so its rows follow --iterations.
   CmdResult ge = run("bench " + d.file("g.hfa") +

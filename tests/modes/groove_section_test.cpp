@@ -225,7 +225,9 @@ TEST(GrooveGapField, BoundsTheGapToEveryCapsuleFromBelow) {
       std::sort(byWidth.begin(), byWidth.end());
       if (byWidth[0].first < 65535 * q) {
         ASSERT_EQ(words[texel + 1], byWidth[0].second) << "at " << ctr.transpose();
-        if (byWidth.size() > 1 && byWidth[1].first < 65535 * q) ASSERT_EQ(words[texel + 2], byWidth[1].second);
+        if (byWidth.size() > 1 && byWidth[1].first < 65535 * q) {
+          ASSERT_EQ(words[texel + 2], byWidth[1].second);
+        }
       }
       candidates += words[texel + 1] != gcast::kNoEntry;
       // The shader's bounds at p: the centre's, less p's distance from the centre.

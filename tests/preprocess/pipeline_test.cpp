@@ -633,7 +633,9 @@ TEST(Pipeline, ProgressMovesInsideAChunk) {
     EXPECT_EQ(v.back().first, v.back().second) << phase;
     size_t inside = 0;
     for (size_t i = 0; i < v.size(); ++i) {
-      if (i > 0) EXPECT_GE(v[i].first, v[i - 1].first) << phase;
+      if (i > 0) {
+        EXPECT_GE(v[i].first, v[i - 1].first) << phase;
+      }
       inside += v[i].first > 0 && v[i].first < v[i].second;
     }
     std::printf("[progress] %s: %zu reports, %zu between 0 and the end\n", phase, v.size(), inside);

@@ -244,7 +244,9 @@ TEST(PullPush, RoundedHeightsStayWithinHalfTheirStep) {
     const uint32_t m = roundHeights(t, maxStep);
     const double codeSize = range / 65534;
     EXPECT_LE(m * codeSize, maxStep * (1 + 1e-12));
-    if (m > 1 && m < 32768) EXPECT_GT(2 * m * codeSize, maxStep) << "the largest such step";
+    if (m > 1 && m < 32768) {
+      EXPECT_GT(2 * m * codeSize, maxStep) << "the largest such step";
+    }
     for (size_t k = 0; k < t.heights.size(); ++k) {
       ASSERT_EQ(before[k] == 0, t.heights[k] == 0);
       if (!before[k]) continue;

@@ -78,7 +78,9 @@ TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
     for (uint32_t k = 0; k < m.size(); ++k) {
       EXPECT_EQ(m[k].w, all[k].w);
       EXPECT_EQ(m[k].heights.empty(), k < 2 && all.size() > k);
-      if (k >= 2) EXPECT_EQ(m[k].heights, all[k].heights);
+      if (k >= 2) {
+        EXPECT_EQ(m[k].heights, all[k].heights);
+      }
     }
     EXPECT_LT(levelBytes(m), levelBytes(all));
     m.assign(all.begin() + 1, all.end());
@@ -95,7 +97,9 @@ TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
     const size_t o = size_t(1) * (m[0].w + 2) + 1;
     const uint16_t got = m[0].heights[o], mask = m[0].cover[o];
     EXPECT_EQ(got != 0, mask != 0);
-    if (got) EXPECT_NEAR(got, sum / covered, 0.51);
+    if (got) {
+      EXPECT_NEAR(got, sum / covered, 0.51);
+    }
     for (int b = 0; b < 4; ++b)
       for (int a = 0; a < 4; ++a) {
         const int x0 = int(a * fu / 4), x1 = int(std::ceil((a + 1) * fu / 4)) - 1;
@@ -291,7 +295,9 @@ TEST(TileResidency, LevelsFollowTheScreenAndTheBudgetEvictsWhatIsNotSeen) {
     EXPECT_EQ(f.dropped.size(), f.evicted);
   }
   std::printf("%u cells, level-0 blocks %.2fx the cache: %u evictions\n", n, double(blocks) / tiny.capacityBytes(), evicted);
-  if (blocks > tiny.capacityBytes()) EXPECT_GT(evicted, 0u);
+  if (blocks > tiny.capacityBytes()) {
+    EXPECT_GT(evicted, 0u);
+  }
 }
 
 }  // namespace
