@@ -1,6 +1,7 @@
 #include "atlas/tile_levels.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -71,36 +72,54 @@ SampleAxis sampleAxis(uint32_t n, uint32_t w) {
   return s;
 }
 
+// The votes of one row of sixteenths: 8 samples across each coarse texel in sample rows r0 and
+// r1 (0 or 1 each) give quarter a of the texel's row of four sixteenths the sum of samples 2a and
+// 2a + 1 in both rows; a sixteenth is covered at kCoverVotes. Eight samples at a time, in the bytes
+// of one 64-bit word (sums of at most 4 stay inside their byte): bit a of the result for quarter a.
+inline uint32_t rowVotes(const uint8_t* r0, const uint8_t* r1) {
+  static_assert(kCoverVotes == 2, "the byte test below adds 126: a sum of 2 or more sets bit 7");
+  static_assert(std::endian::native == std::endian::little, "sample k is byte k of the word");
+  uint64_t x, y;
+  std::memcpy(&x, r0, 8);
+  std::memcpy(&y, r1, 8);
+  x += y;
+  x = (x + (x >> 8)) & 0x00ff00ff00ff00ffull;  // the quarters' sums, in bytes 0, 2, 4, 6
+  x = (x + 0x007e007e007e007eull) & 0x0080008000800080ull;
+  return uint32_t((x >> 7) & 1) | uint32_t((x >> 22) & 2) | uint32_t((x >> 37) & 4) | uint32_t((x >> 52) & 8);
+}
+
 // The masks of level t (t.w x t.h) from its finer level s: a sixteenth is covered where at least
 // kCoverVotes of s's coverage at its quarters' centres are (coveredAt at the sample points,
-// looked up row by row instead of point by point).
+// looked up row by row instead of point by point). At level 0 a sample row depends on its texel
+// row alone, so sample rows on the same texel row share one.
 void coverMasks(const TileImage& s, TileImage& t) {
   const SampleAxis su = sampleAxis(t.w, s.w), sv = sampleAxis(t.h, s.h);
-  std::vector<uint8_t> rows(size_t(8) * 8 * t.w);  // the 8 sample rows of one coarse row
+  const size_t len = size_t(8) * t.w;
+  std::vector<uint8_t> rows(8 * len);  // the 8 sample rows of one coarse row
+  const uint8_t* row[8];
   for (uint32_t j = 0; j < t.h; ++j) {
     for (uint32_t r = 0; r < 8; ++r) {
       const uint32_t fj = sv.texel[8 * j + r], bit = 4u * sv.sub[8 * j + r];
-      uint8_t* row = &rows[size_t(r) * 8 * t.w];
+      if (s.cover.empty() && r > 0 && fj == sv.texel[8 * j + r - 1]) {
+        row[r] = row[r - 1];
+        continue;
+      }
+      uint8_t* out = &rows[r * len];
+      row[r] = out;
       const size_t base = at(s, 0, int(fj));  // the row's first texel
       const uint16_t* hr = &s.heights[base];
       if (s.cover.empty()) {  // level 0: a texel is covered whole or not at all
-        for (uint32_t k = 0; k < 8 * t.w; ++k) row[k] = hr[su.texel[k]] != 0;
+        for (size_t k = 0; k < len; ++k) out[k] = hr[su.texel[k]] != 0;
       } else {
         const uint16_t* cr = &s.cover[base];
-        for (uint32_t k = 0; k < 8 * t.w; ++k)
-          row[k] = uint8_t((hr[su.texel[k]] != 0) & ((cr[su.texel[k]] >> (bit + su.sub[k])) & 1u));
+        for (size_t k = 0; k < len; ++k)
+          out[k] = uint8_t((hr[su.texel[k]] != 0) & ((cr[su.texel[k]] >> (bit + su.sub[k])) & 1u));
       }
     }
     for (uint32_t i = 0; i < t.w; ++i) {
-      uint16_t m = 0;
-      for (uint32_t b = 0; b < 4; ++b)
-        for (uint32_t a = 0; a < 4; ++a) {
-          const size_t k = 8 * i + 2 * a;
-          const uint8_t* r0 = &rows[size_t(2 * b) * 8 * t.w];
-          const uint8_t* r1 = r0 + 8 * t.w;
-          if (r0[k] + r0[k + 1] + r1[k] + r1[k + 1] >= kCoverVotes) m |= uint16_t(1u << (4 * b + a));
-        }
-      t.cover[at(t, int(i), int(j))] = m;
+      uint32_t m = 0;
+      for (uint32_t b = 0; b < 4; ++b) m |= rowVotes(row[2 * b] + 8 * i, row[2 * b + 1] + 8 * i) << (4 * b);
+      t.cover[at(t, int(i), int(j))] = uint16_t(m);
     }
   }
 }

@@ -166,6 +166,40 @@ TEST(TileMips, CoarseMasksKeepLevelZerosCoverageEdges) {
   }
 }
 
+// The masks follow FORMAT.md's rule (a sixteenth covered where 2 of its quarters' centres are)
+// on random coverage too, on tiles of even and odd sides, wide and tall, down to one texel.
+TEST(TileMips, MasksFollowTheRuleOnRandomCoverage) {
+  std::mt19937 rng(7);
+  for (auto [W, H] : {std::pair{40u, 23u}, std::pair{17u, 64u}, std::pair{9u, 9u}, std::pair{2u, 3u}}) {
+    for (double density : {0.2, 0.5, 0.9}) {
+      TileImage t = blankTile(W, H, false, false);
+      std::bernoulli_distribution cov(density);
+      for (uint32_t j = 0; j < H; ++j)
+        for (uint32_t i = 0; i < W; ++i) t.heights[size_t(j + 1) * (W + 2) + i + 1] = cov(rng) ? 500 : 0;
+      int set = 0, clear = 0;
+      while (t.w > 1 || t.h > 1) {
+        const TileImage finer = t;
+        t = coarserLevel(t);
+        for (uint32_t j = 0; j < t.h; ++j)
+          for (uint32_t i = 0; i < t.w; ++i)
+            for (int b = 0; b < 4; ++b)
+              for (int a = 0; a < 4; ++a) {
+                int votes = 0;
+                for (int q = 0; q < 4; ++q)
+                  votes += coveredAt(finer, (i + (a + ((q & 1) + 0.5) / 2) / 4) / t.w, (j + (b + ((q >> 1) + 0.5) / 2) / 4) / t.h);
+                const int bit = (t.cover[size_t(j + 1) * (t.w + 2) + i + 1] >> (4 * b + a)) & 1;
+                ASSERT_EQ(bit, votes >= 2 ? 1 : 0) << W << " x " << H << ", density " << density << ", level "
+                                                   << t.w << " x " << t.h << ", texel " << i << ", " << j;
+                (bit ? set : clear)++;
+              }
+      }
+      if (W * H < 64) continue;  // a few texels may come out all covered or all open
+      EXPECT_GT(set, 0) << W << " x " << H << ", density " << density;
+      EXPECT_GT(clear, 0) << W << " x " << H << ", density " << density;
+    }
+  }
+}
+
 // The shader spreads each level's texels evenly over the cell's box; on a linear ramp across a
 // tile of odd width every level's texel must hold the ramp where it is drawn, within a tenth of
 // that level's texel (measured at most 0.08). A 2 x 2 mean drifts toward the far edge by 0.47
