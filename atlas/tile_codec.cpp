@@ -12,11 +12,13 @@
 namespace sa {
 namespace {
 
-// LOCO-I's median edge detector: a left, b up, c up-left.
+// LOCO-I's median edge detector: a left, b up, c up-left. min(a, b) where c >= max(a, b),
+// max(a, b) where c <= min(a, b), else a + b - c: that is a + b - c clamped to [min, max] (c at
+// or above the max puts a + b - c at or below the min, and the other way), without branches, so
+// the encoder's rows are coded in vector lanes. Components have at most 16 bits.
 inline uint32_t predict(uint32_t a, uint32_t b, uint32_t c) {
-  if (c >= std::max(a, b)) return std::min(a, b);
-  if (c <= std::min(a, b)) return std::max(a, b);
-  return a + b - c;
+  const int lo = int(std::min(a, b)), hi = int(std::max(a, b));
+  return uint32_t(std::clamp(int(a) + int(b) - int(c), lo, hi));
 }
 
 // The prediction of texel i of a row from the row (cur, known left of i) and the one above
@@ -132,8 +134,7 @@ std::vector<uint8_t> interiorOf(const uint8_t* page, uint32_t pageWidth, TileReg
   for (uint32_t j = 0; j < ih; ++j)
     std::memcpy(in.data() + size_t(j) * iw * tb, page + ((size_t(r.y) + j + 1) * pageWidth + r.x + 1) * tb, iw * tb);
   for (uint32_t j = 0; j < r.h; ++j)
-    for (uint32_t i = 0; i < r.w; ++i) {
-      if (i && j && i <= iw && j <= ih) continue;
+    for (uint32_t i = 0; i < r.w; i += (j == 0 || j == r.h - 1 || i == r.w - 1) ? 1 : r.w - 1) {  // the border only
       const uint32_t ci = std::clamp<uint32_t>(i, 1, iw) - 1, cj = std::clamp<uint32_t>(j, 1, ih) - 1;
       const uint8_t* p = page + ((size_t(r.y) + j) * pageWidth + r.x + i) * tb;
       if (!sameTexel(in.data() + (size_t(cj) * iw + ci) * tb, p, tb)) return {};
@@ -155,11 +156,23 @@ std::vector<Level> levelsOf(uint32_t w, uint32_t h) {
   return lv;
 }
 
-// Level `L` of tile `t` (w wide) as a tight grid, and back.
+// Level `L` of tile `t` (w wide) as a tight grid, and back. The texel size is a template
+// argument for the sizes tiles have (1: coverage, 2: heights, 4: normals and colours): one move
+// a texel instead of a test of the size.
+template <size_t TB>
+void gatherAs(const uint8_t* t, uint32_t w, Level L, size_t tb, uint8_t* g) {
+  const size_t n = TB ? TB : tb;
+  for (uint32_t j = 0; j < L.h; ++j) {
+    const uint8_t* row = t + size_t(j) * L.step * w * n;
+    uint8_t* out = g + size_t(j) * L.w * n;
+    for (uint32_t i = 0; i < L.w; ++i) std::memcpy(out + size_t(i) * n, row + size_t(i) * L.step * n, TB ? TB : n);
+  }
+}
 void gather(const uint8_t* t, uint32_t w, Level L, size_t tb, uint8_t* g) {
-  for (uint32_t j = 0; j < L.h; ++j)
-    for (uint32_t i = 0; i < L.w; ++i)
-      copyTexel(g + (size_t(j) * L.w + i) * tb, t + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, tb);
+  if (tb == 1) return gatherAs<1>(t, w, L, tb, g);
+  if (tb == 2) return gatherAs<2>(t, w, L, tb, g);
+  if (tb == 4) return gatherAs<4>(t, w, L, tb, g);
+  gatherAs<0>(t, w, L, tb, g);
 }
 void scatter(const uint8_t* g, Level L, uint32_t w, size_t tb, uint8_t* t) {
   for (uint32_t j = 0; j < L.h; ++j)
@@ -201,8 +214,7 @@ void encodeOdd(const LevelGrids& g, Level L, TexelLayout layout, std::vector<uin
     uint8_t* hi = lo + odd;
     size_t o = 0;
     for (uint32_t j = 0; j < L.h; ++j)
-      for (uint32_t i = 0; i < L.w; ++i) {
-        if (!(i & 1) && !(j & 1)) continue;
+      for (uint32_t i = 1 - (j & 1); i < L.w; i += 2 - (j & 1)) {  // even rows: odd columns; odd rows: all
         const size_t at = (size_t(j) * L.w + i) * tb + size_t(c) * layout.bytes;
         const uint32_t res = (readValue(&g.values[at], layout.bytes) - readValue(&g.rebuilt[at], layout.bytes)) & mask;
         lo[o] = uint8_t(res);
@@ -219,8 +231,7 @@ void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g)
     const uint8_t* hi = lo + odd;
     size_t o = 0;
     for (uint32_t j = 0; j < L.h; ++j)
-      for (uint32_t i = 0; i < L.w; ++i) {
-        if (!(i & 1) && !(j & 1)) continue;
+      for (uint32_t i = 1 - (j & 1); i < L.w; i += 2 - (j & 1)) {  // as encodeOdd
         const size_t at = (size_t(j) * L.w + i) * tb + size_t(c) * layout.bytes;
         const uint32_t res = layout.bytes == 2 ? uint32_t(lo[o]) | uint32_t(hi[o]) << 8 : lo[o];
         const uint32_t v = (readValue(&g.rebuilt[at], layout.bytes) + res) & mask;
