@@ -173,11 +173,24 @@ int64_t GridKnn::findCell(uint64_t key) const {
 }
 
 // A cell's key is the or of its coordinates' spread bits: each z and y is spread once per row, and
-// each x once per call where the rows are short (a block's three), not once per cell.
+// each x once per call where the rows are short (a block's three), not once per cell. The keys
+// are looked up in batches: each batch's hash slots are fetched ahead first (the table is larger
+// than the caches, and the slots of neighbouring cells lie anywhere in it: the lookups were 3 % of
+// a pack's cycles under perf, against 0.2 % of its instructions), then visited in the same order.
 template <class F>
 void GridKnn::forCells(const int64_t a[3], const int64_t b[3], F visit) const {
   constexpr int64_t kRow = 16;
-  uint64_t sx[kRow];
+  constexpr int kBatch = 32;
+  uint64_t sx[kRow], keys[kBatch];
+  int batched = 0;
+  auto flush = [&] {
+    for (int q = 0; q < batched; ++q) __builtin_prefetch(&table_[(hashKey(keys[q]) >> 20) & mask_]);
+    for (int q = 0; q < batched; ++q) {
+      const int64_t ci = findCell(keys[q]);
+      if (ci >= 0) visit(cells_[size_t(ci)]);
+    }
+    batched = 0;
+  };
   const bool kept = b[0] - a[0] < kRow;
   if (kept)
     for (int64_t x = a[0]; x <= b[0]; ++x) sx[x - a[0]] = spread(uint64_t(x));
@@ -186,11 +199,12 @@ void GridKnn::forCells(const int64_t a[3], const int64_t b[3], F visit) const {
     for (int64_t y = a[1]; y <= b[1]; ++y) {
       const uint64_t kyz = kz | spread(uint64_t(y)) << 1;
       for (int64_t x = a[0]; x <= b[0]; ++x) {
-        const int64_t ci = findCell(kyz | (kept ? sx[x - a[0]] : spread(uint64_t(x))));
-        if (ci >= 0) visit(cells_[size_t(ci)]);
+        keys[batched++] = kyz | (kept ? sx[x - a[0]] : spread(uint64_t(x)));
+        if (batched == kBatch) flush();
       }
     }
   }
+  flush();
 }
 
 void GridKnn::gather(const int64_t c[3], int ring, Candidates& out) const {
