@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <memory>
 
 namespace sa {
 namespace {
@@ -44,17 +45,25 @@ uint64_t compact(uint64_t v) {  // the inverse of spread
 
 namespace {
 
+// A point's cell key and index. Arrays of it are made without zeroing them: their first writes
+// are the parallel loops' that fill them, so the pages are first touched (and cleared by the
+// kernel) on every core instead of by one memset (those were most of the grid's serial time).
+struct Keyed {
+  uint64_t first;
+  uint32_t second;
+};
+using KeyedArray = std::unique_ptr<Keyed[]>;
+
 // (key, index) pairs made in index order, sorted by key and then index: a stable radix sort on
 // the key over its used bits, 11 at a time, each pass counted and scattered by blocks on every
 // core (the comparison sort's first partitions ran on one core).
-void sortKeyed(std::vector<std::pair<uint64_t, uint32_t>>& keyed) {
-  const size_t n = keyed.size();
+void sortKeyed(KeyedArray& keyed, size_t n) {
   constexpr size_t kBlock = 1 << 15;
   constexpr int kBits = 11, kDigits = 1 << kBits;
   uint64_t any = 0;
-  for (const auto& e : keyed) any |= e.first;
+  for (size_t i = 0; i < n; ++i) any |= keyed[i].first;
   const size_t blocks = (n + kBlock - 1) / kBlock;
-  std::vector<std::pair<uint64_t, uint32_t>> tmp(n);
+  KeyedArray tmp = std::make_unique_for_overwrite<Keyed[]>(n);
   std::vector<uint32_t> at(blocks * kDigits);
   for (int shift = 0; shift < 64 && (any >> shift); shift += kBits) {
     tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
@@ -106,7 +115,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
   if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;
   if (extent / cell_ >= double(kMaxDim - 1)) cell_ = extent / double(kMaxDim - 2);
   for (int a = 0; a < 3; ++a) dims_[a] = n ? int64_t(std::floor((hi[a] - lo_[a]) / cell_)) + 1 : 1;
-  std::vector<std::pair<uint64_t, uint32_t>> keyed(n);
+  KeyedArray keyed = std::make_unique_for_overwrite<Keyed[]>(n);
   constexpr size_t kGrain = 1 << 14;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -115,7 +124,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
       keyed[i] = {keyOf(c[0], c[1], c[2]), uint32_t(i)};
     }
   });
-  sortKeyed(keyed);
+  sortKeyed(keyed, n);
   order_.resize(n);
   sorted_.resize(3 * n);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
