@@ -730,7 +730,7 @@ Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out) {
   return Status::ok();
 }
 
-Status saveChunk(const std::string& path, const std::vector<ChunkPoint>& points) {
+Status saveChunk(const std::string& path, std::span<const ChunkPoint> points) {
   std::FILE* f = std::fopen(path.c_str(), "wb");
   if (!f) return Status::internal(path + ": cannot write chunk file");
   Status st = writeFrames(f, path, points.data(), points.size());

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -131,7 +132,7 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
 // Reads a chunk file whole.
 // Chunk files hold frames of byte-shuffled, zstd-compressed records (chunker.cpp).
 Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out);
-Status saveChunk(const std::string& path, const std::vector<ChunkPoint>& points);
+Status saveChunk(const std::string& path, std::span<const ChunkPoint> points);
 // Bytes written to chunk files by this process so far (the summary's temporary bytes).
 uint64_t chunkBytesWritten();
 // The same records uncompressed (36 bytes each).

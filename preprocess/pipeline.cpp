@@ -14,8 +14,10 @@
 #include <condition_variable>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <numeric>
+#include <span>
 #include <unordered_map>
 
 #include "atlas/pack_file.h"
@@ -371,7 +373,7 @@ struct ChunkCells {
 
 // The median local area spacing (ChunkPoint::spacing, relative to the chunk's spacing) of the
 // input points in sorted[first, first + count); 0 when none is known (meshes, surface samples).
-float medianSpacing(const std::vector<ChunkPoint>& sorted, uint32_t first, uint32_t count, double chunkSpacing) {
+float medianSpacing(std::span<const ChunkPoint> sorted, uint32_t first, uint32_t count, double chunkSpacing) {
   std::vector<uint16_t> s;
   s.reserve(count);
   for (uint32_t k = first; k < first + count; ++k)
@@ -383,7 +385,7 @@ float medianSpacing(const std::vector<ChunkPoint>& sorted, uint32_t first, uint3
 
 // One of the octree's cells of chunk ci: its frame, its extent in that frame, its points.
 WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>& idx, const std::vector<double>& pos,
-                  const std::vector<ChunkPoint>& sorted, double chunkSpacing) {
+                  std::span<const ChunkPoint> sorted, double chunkSpacing) {
   WorkCell wc;
   wc.chunk = ci;
   wc.first = c.first;
@@ -418,7 +420,7 @@ WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>&
 // Records the octree's cells of a chunk (frames, extents, which vertices and samples they hold):
 // the cells on every core, then the lists of samples and vertices in cell order.
 void addCells(bool triangles, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
-              const std::vector<double>& pos, const std::vector<ChunkPoint>& sorted, ChunkCells& out) {
+              const std::vector<double>& pos, std::span<const ChunkPoint> sorted, ChunkCells& out) {
   const size_t base = out.cells.size();
   out.cells.resize(base + oc.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, oc.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
@@ -535,7 +537,9 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   // A point input's positions are rounded first (roundChunkPositions), so that the cells' extents
   // hold what pass B reads.
   if (!job.triangles) roundChunkPositions(job.qz, sp, pos);
-  std::vector<ChunkPoint> sorted(n);
+  // Made without zeroing it: the loop below touches its pages first, on every core.
+  const std::unique_ptr<ChunkPoint[]> laid = std::make_unique_for_overwrite<ChunkPoint[]>(n);
+  const std::span<ChunkPoint> sorted(laid.get(), n);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const size_t s = idx[i];
