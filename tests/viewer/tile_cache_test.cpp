@@ -113,6 +113,29 @@ TEST(TileMips, CoarserLevelsAverageTheCoveredTexels) {
   }
 }
 
+// Checks each mask of level t (built from `finer`) as FORMAT.md words it: a sixteenth covered
+// where 2 of its quarters' centres are (coveredAt on the finer level). Counts the set and clear
+// bits into *set and *clear where given.
+::testing::AssertionResult masksFollowTheRule(const TileImage& finer, const TileImage& t, int* set = nullptr,
+                                              int* clear = nullptr) {
+  for (uint32_t j = 0; j < t.h; ++j)
+    for (uint32_t i = 0; i < t.w; ++i)
+      for (int b = 0; b < 4; ++b)
+        for (int a = 0; a < 4; ++a) {
+          int votes = 0;
+          for (int q = 0; q < 4; ++q)
+            votes += coveredAt(finer, (i + (a + ((q & 1) + 0.5) / 2) / 4) / t.w, (j + (b + ((q >> 1) + 0.5) / 2) / 4) / t.h);
+          const int bit = (t.cover[size_t(j + 1) * (t.w + 2) + i + 1] >> (4 * b + a)) & 1;
+          if (bit != (votes >= 2 ? 1 : 0))
+            return ::testing::AssertionFailure() << "level " << t.w << " x " << t.h << ", texel " << i << ", " << j
+                                                 << ", sixteenth " << a << ", " << b << ": bit " << bit << ", " << votes
+                                                 << " votes";
+          if (bit && set) ++*set;
+          if (!bit && clear) ++*clear;
+        }
+  return ::testing::AssertionSuccess();
+}
+
 // A coarse level's coverage (its masks) keeps level 0's edges to a sixteenth of its texel, however
 // far the level is from level 0, and drops what is under a quarter of a texel: a one-texel hole
 // and a one-texel speck are gone by level 3 (a far view would show them in pixels that a pixel's
@@ -130,17 +153,7 @@ TEST(TileMips, CoarseMasksKeepLevelZerosCoverageEdges) {
     for (int level = 1; level <= 5; ++level) {
       const TileImage finer = t;
       t = coarserLevel(t);
-      // Each mask as FORMAT.md words it: a sixteenth covered where 2 of its quarters' centres are.
-      for (uint32_t j = 0; j < t.h; ++j)
-        for (uint32_t i = 0; i < t.w; ++i)
-          for (int b = 0; b < 4; ++b)
-            for (int a = 0; a < 4; ++a) {
-              int votes = 0;
-              for (int q = 0; q < 4; ++q)
-                votes += coveredAt(finer, (i + (a + ((q & 1) + 0.5) / 2) / 4) / t.w, (j + (b + ((q >> 1) + 0.5) / 2) / 4) / t.h);
-              ASSERT_EQ((t.cover[size_t(j + 1) * (t.w + 2) + i + 1] >> (4 * b + a)) & 1, votes >= 2 ? 1 : 0)
-                  << "width " << W << ", level " << level << ", texel " << i << ", " << j;
-            }
+      ASSERT_TRUE(masksFollowTheRule(finer, t)) << "width " << W << ", level " << level;
       const double sixteenth = double(W) / t.w / 4;  // in level 0's texels
       int wrong = 0, far = 0;
       for (int j = 0; j < int(W); ++j)
@@ -180,18 +193,7 @@ TEST(TileMips, MasksFollowTheRuleOnRandomCoverage) {
       while (t.w > 1 || t.h > 1) {
         const TileImage finer = t;
         t = coarserLevel(t);
-        for (uint32_t j = 0; j < t.h; ++j)
-          for (uint32_t i = 0; i < t.w; ++i)
-            for (int b = 0; b < 4; ++b)
-              for (int a = 0; a < 4; ++a) {
-                int votes = 0;
-                for (int q = 0; q < 4; ++q)
-                  votes += coveredAt(finer, (i + (a + ((q & 1) + 0.5) / 2) / 4) / t.w, (j + (b + ((q >> 1) + 0.5) / 2) / 4) / t.h);
-                const int bit = (t.cover[size_t(j + 1) * (t.w + 2) + i + 1] >> (4 * b + a)) & 1;
-                ASSERT_EQ(bit, votes >= 2 ? 1 : 0) << W << " x " << H << ", density " << density << ", level "
-                                                   << t.w << " x " << t.h << ", texel " << i << ", " << j;
-                (bit ? set : clear)++;
-              }
+        ASSERT_TRUE(masksFollowTheRule(finer, t, &set, &clear)) << W << " x " << H << ", density " << density;
       }
       if (W * H < 64) continue;  // a few texels may come out all covered or all open
       EXPECT_GT(set, 0) << W << " x " << H << ", density " << density;
