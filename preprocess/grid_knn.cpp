@@ -17,6 +17,8 @@ constexpr int64_t kMaxDim = int64_t(1) << 20;
 constexpr int kMaxRing = 3;  // beyond: every cell, pruned by its distance
 
 uint64_t hashKey(uint64_t k) { return k * 0x9E3779B97F4A7C15ull; }
+// A key's first slot in a table of mask + 1 slots (linear probing from there).
+uint64_t slotOf(uint64_t key, uint64_t mask) { return (hashKey(key) >> 20) & mask; }
 
 // Morton order: the bits of x, y and z interleaved, so cells close in space are mostly close in
 // the sorted order (a point's neighbours then lie in nearby memory, also for callers that
@@ -143,7 +145,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
   mask_ = size - 1;
   table_.assign(size, Slot{0, -1});
   for (size_t c = 0; c < cells_.size(); ++c) {
-    uint64_t h = (hashKey(cells_[c].key) >> 20) & mask_;
+    uint64_t h = slotOf(cells_[c].key, mask_);
     while (table_[h].cell >= 0) h = (h + 1) & mask_;
     table_[h] = {cells_[c].key, int64_t(c)};
   }
@@ -173,7 +175,7 @@ void GridKnn::coords(size_t i, int64_t c[3]) const {
 }
 
 int64_t GridKnn::findCell(uint64_t key) const {
-  uint64_t h = (hashKey(key) >> 20) & mask_;
+  uint64_t h = slotOf(key, mask_);
   while (table_[h].cell >= 0) {
     if (table_[h].key == key) return table_[h].cell;
     h = (h + 1) & mask_;
@@ -193,7 +195,7 @@ void GridKnn::forCells(const int64_t a[3], const int64_t b[3], F visit) const {
   uint64_t sx[kRow], keys[kBatch];
   int batched = 0;
   auto flush = [&] {
-    for (int q = 0; q < batched; ++q) __builtin_prefetch(&table_[(hashKey(keys[q]) >> 20) & mask_]);
+    for (int q = 0; q < batched; ++q) __builtin_prefetch(&table_[slotOf(keys[q], mask_)]);
     for (int q = 0; q < batched; ++q) {
       const int64_t ci = findCell(keys[q]);
       if (ci >= 0) visit(cells_[size_t(ci)]);
