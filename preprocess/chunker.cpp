@@ -693,7 +693,7 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
 }
 
 // Frames are read in batches, a few per thread, and decoded on every core into their places.
-Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out) {
+Status loadChunk(const ChunkInfo& chunk, ChunkRecords& out) {
   out.clear();
   out.reserve(chunk.count);
   std::FILE* f = std::fopen(chunk.path.c_str(), "rb");

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 
+#include "common/raw_vector.h"
 #include "formats/source.h"
 
 namespace sa {
@@ -28,6 +29,10 @@ struct ChunkPoint {
   uint32_t vid;  // index of the point in its file (mesh vertex index for the triangle path)
 };
 static_assert(sizeof(ChunkPoint) == 36);
+
+// A chunk's records in memory: resized without zeroing (common/raw_vector.h), since the loops
+// that fill them (frames decoded on every core, records gathered) write every one.
+using ChunkRecords = RawVector<ChunkPoint>;
 
 // Fraction bits a normal component keeps in the chunk files between passes A and B: its low
 // mantissa bytes become zero and compress to nothing.
@@ -131,7 +136,7 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
 
 // Reads a chunk file whole.
 // Chunk files hold frames of byte-shuffled, zstd-compressed records (chunker.cpp).
-Status loadChunk(const ChunkInfo& chunk, std::vector<ChunkPoint>& out);
+Status loadChunk(const ChunkInfo& chunk, ChunkRecords& out);
 Status saveChunk(const std::string& path, std::span<const ChunkPoint> points);
 // Bytes written to chunk files by this process so far (the summary's temporary bytes).
 uint64_t chunkBytesWritten();

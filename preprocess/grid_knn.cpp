@@ -153,7 +153,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
 
 // The points' extent, the cells and their Morton order are the same for any numbering of the
 // points; within a cell the points stay in the same sequence (by index before, by place now).
-GridKnn GridKnn::inOrder(std::vector<double>& src, std::vector<uint32_t>& orig) && {
+GridKnn GridKnn::inOrder(RawVector<double>& src, std::vector<uint32_t>& orig) && {
   GridKnn g = std::move(*this);
   orig = std::move(g.order_);
   src = std::move(g.sorted_);

@@ -15,6 +15,8 @@
 #include <limits>
 #include <vector>
 
+#include "common/raw_vector.h"
+
 namespace sa {
 
 // The bounds of n xyz-interleaved points, on every core (min and max are exact in any order);
@@ -33,7 +35,7 @@ class GridKnn {
   // This grid, its points renumbered in its order (point k is the caller's order()[k], now in
   // orig): the grid GridKnn(src, n, cell) builds over src, the positions in that order, without
   // sorting them again. src and orig are the caller's; src is kept by reference.
-  GridKnn inOrder(std::vector<double>& src, std::vector<uint32_t>& orig) &&;
+  GridKnn inOrder(RawVector<double>& src, std::vector<uint32_t>& orig) &&;
 
   // A cell side for k neighbours on a surface sampled with area spacing `spacing` (the side
   // of the area per point): the k-th neighbour usually lies within it.
@@ -113,7 +115,7 @@ class GridKnn {
   double lo_[3];
   int64_t dims_[3];
   std::vector<uint32_t> order_;  // point indices sorted by cell
-  std::vector<double> sorted_;   // their positions in that order
+  RawVector<double> sorted_;     // their positions in that order (resized without zeroing: the loop filling it touches it first)
   const double* sortedPos_;      // sorted_, or pos_ where the points are in the grid's order
   std::vector<Cell> cells_;
   struct Slot {

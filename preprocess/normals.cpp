@@ -421,7 +421,10 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
 template <class T>
 void permuteInPlace(T* v, size_t width, const std::vector<uint32_t>& order) {
   const size_t n = order.size();
-  std::vector<T> copy(v, v + width * n);
+  RawVector<T> copy(width * n);  // copied on every core, like the permutation
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, width * n, 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
+    std::copy(v + r.begin(), v + r.end(), copy.begin() + long(r.begin()));
+  });
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) std::copy_n(&copy[width * size_t(order[i])], width, &v[width * i]);
   });
@@ -444,7 +447,7 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
   // point's neighbours lie all over the chunk's arrays, and at millions of points the fit
   // mostly waited for memory.
   std::vector<uint32_t> orig;
-  std::vector<double> src;
+  RawVector<double> src;
   const GridKnn grid = GridKnn(pos, n, GridKnn::cellFor(spacing, k)).inOrder(src, orig);
   NormalOrientation laidOrient;
   std::vector<uint16_t> scans;

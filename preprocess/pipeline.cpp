@@ -23,6 +23,7 @@
 #include "atlas/pack_file.h"
 #include "atlas/packing.h"
 #include "common/fileio.h"
+#include "common/raw_vector.h"
 #include "common/serial.h"
 #include "preprocess/cell_margin.h"
 #include "preprocess/cluster.h"
@@ -126,7 +127,8 @@ struct PackJob {
   uint64_t otherScratch[2] = {0, 0};  // and their chunk bytes (compressed, raw)
 };
 
-void decodePositions(const std::vector<ChunkPoint>& pts, const Quantizer& qz, std::vector<double>& pos) {
+// pos is resized without zeroing (RawVector): its pages are first touched by the loop, on every core.
+void decodePositions(std::span<const ChunkPoint> pts, const Quantizer& qz, RawVector<double>& pos) {
   pos.resize(pts.size() * 3);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i < r.end(); ++i)
@@ -222,22 +224,25 @@ Status distributePhase(PackJob& job, const std::string& outPath) {
   return Status::ok();
 }
 
-// Normals of a chunk's points from the file or the mesh (zero where unknown).
-void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::vector<float>& nrm) {
-  const size_t n = pts.size();
-  nrm.assign(3 * n, 0.f);
-  for (size_t i = 0; i < n; ++i) {
-    if (job.fileNormals || (pts[i].flags & kChunkSurfaceSample)) {
-      std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
-    } else if (job.triangles) {
-      const size_t v = pts[i].vid;
-      if (3 * v + 2 < job.dist.vertexNormal.size()) {
-        Eigen::Vector3f nn(&job.dist.vertexNormal[3 * v]);
-        if (nn.norm() > 0) nn.normalize();
-        std::copy(nn.data(), nn.data() + 3, &nrm[3 * i]);
+// Normals of a chunk's points from the file or the mesh (zero where unknown), on every core.
+void givenNormals(const PackJob& job, std::span<const ChunkPoint> pts, RawVector<float>& nrm) {
+  nrm.resize(3 * pts.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      float* out = &nrm[3 * i];
+      std::fill(out, out + 3, 0.f);
+      if (job.fileNormals || (pts[i].flags & kChunkSurfaceSample)) {
+        std::copy(pts[i].n, pts[i].n + 3, out);
+      } else if (job.triangles) {
+        const size_t v = pts[i].vid;
+        if (3 * v + 2 < job.dist.vertexNormal.size()) {
+          Eigen::Vector3f nn(&job.dist.vertexNormal[3 * v]);
+          if (nn.norm() > 0) nn.normalize();
+          std::copy(nn.data(), nn.data() + 3, out);
+        }
       }
     }
-  }
+  });
 }
 
 // The fit's output laid out in its grid order (pos, nrm, keep: the point at i was at order[i] in
@@ -246,25 +251,26 @@ void givenNormals(const PackJob& job, const std::vector<ChunkPoint>& pts, std::v
 // octree's first index array. The octree then splits the points exactly as it did over the
 // file's order, and its sums add the same numbers in the same order, while it and the chunk's
 // rewrite, which visit the points by cell, read nearby memory.
-std::vector<uint32_t> layOutKept(std::vector<ChunkPoint>& pts, std::vector<double>& pos, std::vector<float>& nrm,
+// Its arrays are made without zeroing (RawVector): the loops that fill them touch them first.
+std::vector<uint32_t> layOutKept(ChunkRecords& pts, RawVector<double>& pos, RawVector<float>& nrm,
                                  const std::vector<uint8_t>& keep, const std::vector<uint32_t>& order) {
   const size_t n = pts.size();
-  std::vector<uint32_t> rank(n);  // a kept point's index among the kept, in the file's order
-  std::vector<uint8_t> kept(n);
+  RawVector<uint32_t> rank(n);  // a kept point's index among the kept, in the file's order
+  RawVector<uint8_t> kept(n);
   const tbb::blocked_range<size_t> all(0, n, 1 << 14);
   tbb::parallel_for(all, [&](const tbb::blocked_range<size_t>& b) {
     for (size_t i = b.begin(); i != b.end(); ++i) kept[order[i]] = keep[i];
   });
   uint32_t r = 0;
   for (size_t o = 0; o < n; ++o) rank[o] = kept[o] ? r++ : 0;
-  std::vector<uint32_t> to(n);  // where a kept point goes in the grid's order
+  RawVector<uint32_t> to(n);  // where a kept point goes in the grid's order
   uint32_t m = 0;
   for (size_t i = 0; i < n; ++i) {
     to[i] = m;
     m += keep[i];
   }
   std::vector<uint32_t> place(r);
-  std::vector<ChunkPoint> laid(r);
+  ChunkRecords laid(r);
   tbb::parallel_for(all, [&](const tbb::blocked_range<size_t>& b) {  // the records, gathered on every core
     for (size_t i = b.begin(); i != b.end(); ++i)
       if (keep[i]) {
@@ -286,8 +292,8 @@ std::vector<uint32_t> layOutKept(std::vector<ChunkPoint>& pts, std::vector<doubl
 // Point inputs: outliers out, normals, moving-least-squares smoothing (preprocess/normals.h),
 // pts, pos and nrm laid out in the fit's grid order (SurfaceOptions::layOut) and the outliers
 // dropped from them: returns where each kept point went (layOutKept).
-std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint>& pts, std::vector<double>& pos,
-                                      std::vector<float>& nrm, const Spacing& spacing, ChunkTicker& ticker,
+std::vector<uint32_t> fitChunkSurface(const PackJob& job, ChunkRecords& pts, RawVector<double>& pos,
+                                      RawVector<float>& nrm, const Spacing& spacing, ChunkTicker& ticker,
                                       uint64_t& removed) {
   const double chunkSpacing = spacing.nearest;
   NormalOrientation orient;
@@ -304,7 +310,7 @@ std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint
   so.spacing = spacing.area > 0 ? spacing.area : spacing.nearest;
   so.progress = [&](size_t n) { ticker.add(n); };
   std::vector<uint8_t> keep;
-  std::vector<float> local(pts.size(), 0.f);
+  RawVector<float> local(pts.size());  // every entry written by the fit
   std::vector<uint32_t> order;
   so.layOut = true;
   removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data(), &order);
@@ -316,7 +322,7 @@ std::vector<uint32_t> fitChunkSurface(const PackJob& job, std::vector<ChunkPoint
 }
 
 // Sample spacing of a chunk's input points (points sampled on large triangles left out).
-Spacing chunkSpacing(const std::vector<ChunkPoint>& pts, const std::vector<double>& pos) {
+Spacing chunkSpacing(std::span<const ChunkPoint> pts, std::span<const double> pos) {
   const bool sampled = std::any_of(pts.begin(), pts.end(), [](const ChunkPoint& p) { return p.flags & kChunkSurfaceSample; });
   if (!sampled) return estimateSpacing(pos.data(), pts.size());
   std::vector<double> real;
@@ -384,7 +390,7 @@ float medianSpacing(std::span<const ChunkPoint> sorted, uint32_t first, uint32_t
 }
 
 // One of the octree's cells of chunk ci: its frame, its extent in that frame, its points.
-WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>& idx, const std::vector<double>& pos,
+WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>& idx, std::span<const double> pos,
                   std::span<const ChunkPoint> sorted, double chunkSpacing) {
   WorkCell wc;
   wc.chunk = ci;
@@ -420,7 +426,7 @@ WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>&
 // Records the octree's cells of a chunk (frames, extents, which vertices and samples they hold):
 // the cells on every core, then the lists of samples and vertices in cell order.
 void addCells(bool triangles, uint32_t ci, const std::vector<OctreeCell>& oc, const std::vector<uint32_t>& idx,
-              const std::vector<double>& pos, std::span<const ChunkPoint> sorted, ChunkCells& out) {
+              std::span<const double> pos, std::span<const ChunkPoint> sorted, ChunkCells& out) {
   const size_t base = out.cells.size();
   out.cells.resize(base + oc.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, oc.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
@@ -466,7 +472,7 @@ constexpr int kChunkPositionBits = 10;
 // Rounds a point chunk's positions to multiples of the largest power-of-two step of the
 // quantizer's grid under spacing / 2^kChunkPositionBits, so that the low bits the chunk files
 // would otherwise carry as noise are zero (the frames shift them out).
-void roundChunkPositions(const Quantizer& qz, double spacing, std::vector<double>& pos) {
+void roundChunkPositions(const Quantizer& qz, double spacing, std::span<double> pos) {
   if (!(spacing > 0)) return;
   const double unit = qz.cubeSize / 4294967296.0;
   const int bits = std::clamp(int(std::floor(std::log2(std::ldexp(spacing, -kChunkPositionBits) / unit))), 0, 24);
@@ -485,9 +491,9 @@ void roundChunkPositions(const Quantizer& qz, double spacing, std::vector<double
 Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, uint64_t before, uint64_t total,
                   ChunkCells& out) {
   const ChunkInfo& ch = job.dist.chunks[ci];
-  std::vector<ChunkPoint> pts;
-  std::vector<double> pos;
-  std::vector<float> nrm;
+  ChunkRecords pts;
+  RawVector<double> pos;
+  RawVector<float> nrm;
   SA_RETURN_IF_ERROR(loadChunk(ch, pts));
   decodePositions(pts, job.qz, pos);
   givenNormals(job, pts, nrm);
@@ -981,8 +987,8 @@ void dropSteepMargin(const WorkCell& c, const TileGrid& g, TileOutput& tile) {
 
 // One cell's tile from its points (in the rewritten chunk: smoothed, with normals) and the
 // neighbouring cells' points in its margin (preprocess/cell_margin.h).
-void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, const std::vector<ChunkPoint>& pts,
-               const std::vector<double>& pos, const MarginFinder& margins, bool withColor, PackWriter& writer,
+void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, std::span<const ChunkPoint> pts,
+               std::span<const double> pos, const MarginFinder& margins, bool withColor, PackWriter& writer,
                uint32_t id, TileGrid& g, TileOutput& tile) {
   const Eigen::Vector3d O = vec(r.origin), U = vec(r.u), V = vec(r.v), Wn = vec(r.w);
   const double cover = job.opt.coverageRadius * job.sum.spacing;
@@ -1120,15 +1126,17 @@ TileGrid tileGrid(const CellRecord& r) {
 
 // ---- pass B, one chunk: every cell's tile ----
 Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, PackWriter& writer, ChunkTicker& ticker) {
-  std::vector<ChunkPoint> pts;
-  std::vector<double> pos;
+  ChunkRecords pts;
+  RawVector<double> pos;
   SA_RETURN_IF_ERROR(loadChunk(job.dist.chunks[ci], pts));
   decodePositions(pts, job.qz, pos);
   std::unordered_map<uint32_t, std::vector<uint32_t>> cellTris;
   if (job.triangles) SA_RETURN_IF_ERROR(chunkTriangles(job, ci, cellTris));
   const bool withColor = (job.meta.flags & kPackHasColor) != 0;
-  std::vector<float> nrm(job.triangles ? 0 : 3 * pts.size());
-  for (size_t i = 0; i < nrm.size() / 3; ++i) std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
+  RawVector<float> nrm(job.triangles ? 0 : 3 * pts.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nrm.size() / 3, 1 << 14), [&](const tbb::blocked_range<size_t>& b) {
+    for (size_t i = b.begin(); i != b.end(); ++i) std::copy(pts[i].n, pts[i].n + 3, &nrm[3 * i]);
+  });
   const MarginFinder margins(pos.data(), nrm.data(), job.triangles ? 0 : pts.size(), job.chunkAreaSpacing[ci]);
   Status failed;
   std::mutex failMu;

@@ -80,7 +80,7 @@ TEST(ChunkFile, RoundTripsExactlyAndIsSmallerThanItsRecords) {
   ChunkInfo c;
   c.path = path;
   c.count = pts.size();
-  std::vector<ChunkPoint> back;
+  ChunkRecords back;
   ASSERT_TRUE(loadChunk(c, back).isOk());
   ASSERT_EQ(back.size(), pts.size());
   EXPECT_EQ(std::memcmp(back.data(), pts.data(), pts.size() * sizeof(ChunkPoint)), 0);
@@ -94,9 +94,9 @@ std::vector<ChunkPoint> roundTrip(const test::TempDir& dir, const std::vector<Ch
   ChunkInfo c;
   c.path = path;
   c.count = pts.size();
-  std::vector<ChunkPoint> back;
+  ChunkRecords back;
   EXPECT_TRUE(loadChunk(c, back).isOk());
-  return back;
+  return {back.begin(), back.end()};
 }
 
 // Pass A rounds a point chunk's positions to a step under its spacing and writes them in cell
@@ -141,7 +141,7 @@ TEST(ChunkFile, DamagedOrMiscountedFilesAreErrorsNamingTheFile) {
     ChunkInfo c;
     c.path = file;
     c.count = count;
-    std::vector<ChunkPoint> back;
+    ChunkRecords back;
     Status s = loadChunk(c, back);
     ASSERT_FALSE(s.isOk()) << what;
     EXPECT_NE(s.message().find(file), std::string::npos) << what << ": " << s.message();
@@ -220,7 +220,7 @@ TEST(Distribute, PlannedChunksAreTheSplitChunksWrittenOnce) {
     EXPECT_EQ(s.count, p.count);
     EXPECT_LE(p.count, 3000u);
     levels.insert(p.level);
-    std::vector<ChunkPoint> a, c;
+    ChunkRecords a, c;
     ASSERT_TRUE(loadChunk(s, a).isOk());
     ASSERT_TRUE(loadChunk(p, c).isOk());
     ASSERT_EQ(a.size(), c.size());

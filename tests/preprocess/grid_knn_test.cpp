@@ -120,7 +120,7 @@ TEST(GridKnn, InOrderEqualsAGridBuiltOnTheSortedPoints) {
   for (int i = 0; i < 40; ++i) pos.insert(pos.end(), {pos[3 * size_t(i)], pos[3 * size_t(i) + 1], pos[3 * size_t(i) + 2]});  // duplicates
   const size_t n = pos.size() / 3;
   const double cell = 0.04;
-  std::vector<double> src;
+  RawVector<double> src;
   std::vector<uint32_t> orig;
   const GridKnn renumbered = GridKnn(pos.data(), n, cell).inOrder(src, orig);
   ASSERT_EQ(orig.size(), n);
@@ -130,7 +130,7 @@ TEST(GridKnn, InOrderEqualsAGridBuiltOnTheSortedPoints) {
   std::vector<uint32_t> sortedOrig = orig;
   std::sort(sortedOrig.begin(), sortedOrig.end());
   for (size_t k = 0; k < n; ++k) ASSERT_EQ(sortedOrig[k], k) << "orig is a permutation";
-  const std::vector<double> copy = src;
+  const std::vector<double> copy(src.begin(), src.end());
   const GridKnn fresh(copy.data(), n, cell);
   for (size_t k = 0; k < n; ++k) ASSERT_EQ(fresh.order()[k], k) << "the sorted points are in the fresh grid's order";
   auto answers = [&](const GridKnn& g) {
