@@ -53,7 +53,8 @@ struct SurfaceOptions {
 // whose neighbourhood is degenerate keep their position and get a zero normal when estimated.
 // An outlier's position and normal are left as the fit made them (callers drop outliers).
 // Returns the number of outliers.
-// localSpacing (may be null): per point, the side of its area, r_8 sqrt(pi / 8) (Spacing::area).
+// localSpacing (may be null): per point, the side of its area, r_8 sqrt(pi / 8) (Spacing::area);
+// written for every point (callers may pass memory they have not initialized).
 // order (may be null): the points in the neighbour grid's order (SurfaceOptions::layOut).
 size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const SurfaceOptions& opt, float* nrm,
                   std::vector<uint8_t>& keep, float* localSpacing = nullptr, std::vector<uint32_t>* order = nullptr);

@@ -256,7 +256,7 @@ std::vector<uint32_t> layOutKept(ChunkRecords& pts, RawVector<double>& pos, RawV
                                  const std::vector<uint8_t>& keep, const std::vector<uint32_t>& order) {
   const size_t n = pts.size();
   RawVector<uint32_t> rank(n);  // a kept point's index among the kept, in the file's order
-  RawVector<uint8_t> kept(n);
+  RawVector<uint8_t> kept(n);  // every entry written below: order is a permutation
   const tbb::blocked_range<size_t> all(0, n, 1 << 14);
   tbb::parallel_for(all, [&](const tbb::blocked_range<size_t>& b) {
     for (size_t i = b.begin(); i != b.end(); ++i) kept[order[i]] = keep[i];
