@@ -8,7 +8,6 @@
 #include <array>
 #include <cmath>
 #include <limits>
-#include <memory>
 
 namespace sa {
 namespace {
@@ -54,7 +53,7 @@ struct Keyed {
   uint64_t first;
   uint32_t second;
 };
-using KeyedArray = std::unique_ptr<Keyed[]>;
+using KeyedArray = RawVector<Keyed>;
 
 // (key, index) pairs made in index order, sorted by key and then index: a stable radix sort on
 // the key over its used bits, 11 at a time, each pass counted and scattered by blocks on every
@@ -65,7 +64,7 @@ void sortKeyed(KeyedArray& keyed, size_t n) {
   uint64_t any = 0;
   for (size_t i = 0; i < n; ++i) any |= keyed[i].first;
   const size_t blocks = (n + kBlock - 1) / kBlock;
-  KeyedArray tmp = std::make_unique_for_overwrite<Keyed[]>(n);
+  KeyedArray tmp(n);
   std::vector<uint32_t> at(blocks * kDigits);
   for (int shift = 0; shift < 64 && (any >> shift); shift += kBits) {
     tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
@@ -117,7 +116,7 @@ GridKnn::GridKnn(const double* pos, size_t n, double cell) : pos_(pos), n_(n), c
   if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = extent > 0 ? extent / 64 : 1;
   if (extent / cell_ >= double(kMaxDim - 1)) cell_ = extent / double(kMaxDim - 2);
   for (int a = 0; a < 3; ++a) dims_[a] = n ? int64_t(std::floor((hi[a] - lo_[a]) / cell_)) + 1 : 1;
-  KeyedArray keyed = std::make_unique_for_overwrite<Keyed[]>(n);
+  KeyedArray keyed(n);
   constexpr size_t kGrain = 1 << 14;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {

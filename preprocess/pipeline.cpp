@@ -543,9 +543,7 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   // A point input's positions are rounded first (roundChunkPositions), so that the cells' extents
   // hold what pass B reads.
   if (!job.triangles) roundChunkPositions(job.qz, sp, pos);
-  // Made without zeroing it: the loop below touches its pages first, on every core.
-  const std::unique_ptr<ChunkPoint[]> laid = std::make_unique_for_overwrite<ChunkPoint[]>(n);
-  const std::span<ChunkPoint> sorted(laid.get(), n);
+  ChunkRecords sorted(n);  // not zeroed: the loop below touches its pages first, on every core
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const size_t s = idx[i];
