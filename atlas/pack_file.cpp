@@ -224,7 +224,8 @@ Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, c
   for (int l = 0; l < 3; ++l) {
     if (!present[l]) continue;
     std::vector<uint8_t> t = withGutter(src[l], c.tileW, c.tileH, size_t(layouts[l].texelBytes()));
-    SA_RETURN_IF_ERROR(append(encodeTile(t.data(), whole.w, whole, layouts[l], level_), l));
+    const TileForm form = l == 1 ? normalForm_ : TileForm::kSmaller;
+    SA_RETURN_IF_ERROR(append(encodeTile(t.data(), whole.w, whole, layouts[l], level_, form), l));
     if (!storeLevels_) continue;
     if (l == 0) {
       level0.heights.resize(t.size() / 2);

@@ -63,10 +63,14 @@ class PackWriter {
   // Compressed pages (FORMAT.md): HGTZ, NRMZ, COLZ instead of HGHT, NRML, COLR. Before open().
   // level: zstd's for the coded tiles (kDefaultTileLevel).
   // storeLevels: also a MIPZ section of each tile's coarser levels (tile_levels.h).
-  void setCompressPages(bool on, int level = kDefaultTileLevel, bool storeLevels = true) {
+  // normalForm: how the normal tiles are coded (TileForm::kPyramid where they were snapped to
+  // the pyramid).
+  void setCompressPages(bool on, int level = kDefaultTileLevel, bool storeLevels = true,
+                        TileForm normalForm = TileForm::kSmaller) {
     compress_ = on;
     level_ = level;
     storeLevels_ = storeLevels;
+    normalForm_ = normalForm;
   }
   // Computes checksums, writes header, META and CELL, fsyncs and renames into place (with
   // compressed pages: the final file from the coded tiles, in cell order, and the temporaries
@@ -96,6 +100,7 @@ class PackWriter {
   bool compress_ = false;
   int level_ = kDefaultTileLevel;
   bool storeLevels_ = true;
+  TileForm normalForm_ = TileForm::kSmaller;
   uint64_t metaOff_ = 0, cellOff_ = 0, hghtOff_ = 0, nrmlOff_ = 0, colrOff_ = 0, noteOff_ = 0, fileSize_ = 0;
   std::atomic<uint64_t> blobEnd_{0};
   std::vector<CellBlobs> blobs_;

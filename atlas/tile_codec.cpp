@@ -450,12 +450,15 @@ size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32
   return snapped;
 }
 
-std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level) {
-  const std::vector<uint8_t> planes = residualPlanes(page, pageWidth, r, layout);
-  if (layout.comps == 1) return compress(planes, level);  // heights: LOCO-I alone was as small on the 2 M-point survey
+std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level,
+                                TileForm form) {
+  // heights: LOCO-I alone was as small on the 2 M-point survey
+  if (layout.comps == 1) return compress(residualPlanes(page, pageWidth, r, layout), level);
   // Normals and colours: the pyramid or LOCO-I, whichever codes smaller (both decode to the
-  // same texels), judged by quickSize.
+  // same texels), judged by quickSize; snapped texels: the pyramid.
   const std::vector<uint8_t> payload = pyramidPayload(page, pageWidth, r, layout);
+  if (!payload.empty() && form == TileForm::kPyramid) return pyramidBlob(payload, level);
+  const std::vector<uint8_t> planes = residualPlanes(page, pageWidth, r, layout);
   if (!payload.empty() && quickSize(payload) < quickSize(planes)) return pyramidBlob(payload, level);
   return compress(planes, level);
 }

@@ -1372,7 +1372,9 @@ Status shareRootPhases(PackJob& job, const Status& s) {
 // Rank 0 creates the output's temporary; the other ranks write their tiles into it.
 Status openWriter(const PackJob& job, const std::string& outPath, PackWriter& writer) {
   const std::string note = makeNote(job);
-  writer.setCompressPages(job.opt.compressPages, job.opt.pageLevel, job.opt.storeLevels);
+  const bool snapped = effectivePrecision(job.opt, job.triangles).normalTolerance > 0;  // reducePrecision
+  writer.setCompressPages(job.opt.compressPages, job.opt.pageLevel, job.opt.storeLevels,
+                          snapped ? TileForm::kPyramid : TileForm::kSmaller);
   // Compressed pages: every rank codes its tiles into a temporary of its own (joinTiles).
   const bool own = job.opt.compressPages || Cluster::rank() == 0;
   Status s = own ? writer.open(outPath, job.meta, job.records, note) : Status::ok();

@@ -85,6 +85,37 @@ TEST(TileCodec, EveryTileDecodesToItsBytesInEitherForm) {
   EXPECT_GT(pyramids, tiles / 5);
 }
 
+// TileForm::kPyramid codes every tile that has a pyramid (a repeating gutter, pyramid levels) as
+// the pyramid, also where kSmaller finds LOCO-I smaller, and it decodes to the same bytes.
+TEST(TileCodec, PyramidFormCodesEveryTileThatHasOne) {
+  std::mt19937 rng(5);
+  int forced = 0, tiles = 0;
+  for (TexelLayout L : {kNormalTexels, kColorTexels})
+    for (int trial = 0; trial < 80; ++trial) {
+      const uint32_t w = 1 + rng() % 40, h = 1 + rng() % 40;
+      const size_t tb = size_t(L.texelBytes());
+      std::vector<uint8_t> cov;
+      // No noise on most: smooth ramps, where LOCO-I predicts well.
+      std::vector<uint8_t> t = makeTile(w, h, L, trial % 4 == 0 ? 3.0 : 0, 0.02, rng, cov);
+      if (trial % 3 == 0) snapToPyramid(t.data(), cov.data(), w, h, L, [](const uint8_t*, const uint8_t*) { return true; });
+      std::vector<uint8_t> page = withGutter(t, w, h, tb, w + 2, 0, 0, h + 2);
+      const bool gutterRepeats = trial % 7 != 6;
+      if (!gutterRepeats) page[0] ^= 1;
+      const TileRegion r{0, 0, w + 2, h + 2};
+      const std::vector<uint8_t> blob = encodeTile(page.data(), w + 2, r, L, kDefaultTileLevel, TileForm::kPyramid);
+      const bool hasPyramid = gutterRepeats && pyramidLevels(w, h) > 0;
+      ASSERT_EQ(isPyramid(blob), hasPyramid) << "layout " << L.comps << " tile " << w << "x" << h << " trial " << trial;
+      tiles += hasPyramid;
+      forced += hasPyramid && !isPyramid(encodeTile(page.data(), w + 2, r, L));
+      std::vector<uint8_t> back(page.size(), 0xa5);
+      const Status s = decodeTile(blob, back.data(), w + 2, r, L);
+      ASSERT_TRUE(s.isOk()) << s.message();
+      ASSERT_EQ(back, page) << "layout " << L.comps << " tile " << w << "x" << h << " trial " << trial;
+    }
+  std::printf("%d of %d tiles with a pyramid were LOCO-I by size\n", forced, tiles);
+  EXPECT_GT(forced, 0) << "no tile where the form made a difference";
+}
+
 // Snapping moves no covered texel past what `close` allows, leaves holes and the coarsest
 // level's even texels alone, and makes the coded tile smaller.
 TEST(TileCodec, SnappingStaysWithinItsToleranceAndShrinksTheTile) {
