@@ -27,8 +27,9 @@ const char* kHelp =
     "transforms), PCD (ascii, binary, binary_compressed; NaN entries of organized clouds\n"
     "skipped), Draco .drc (clouds and meshes), LAS 1.0-1.4 (LAZ must be decompressed first),\n"
     "OBJ/OFF/STL meshes and text clouds (.xyz, .pts, .csv, .txt). Memory stays within\n"
-    "--mem-budget whatever the input size (points go through on-disk chunks), except that PCD\n"
-    "binary_compressed and Draco files are decoded whole and meshes are held in memory.\n"
+    "--mem-budget whatever the input size (points go through on-disk chunks; a point input that\n"
+    "fits one chunk stays in memory), except that PCD binary_compressed and Draco files are\n"
+    "decoded whole and meshes are held in memory.\n"
     "\n"
     "On a cluster: mpirun -np N scanatlas pack ... (or srun --mpi=pmix under Slurm) splits the\n"
     "chunks' normals, octree and height maps over N ranks; rank 0 reads, distributes and writes.\n"
@@ -281,14 +282,14 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
     std::printf("{\"output\": \"%s\", \"points\": %llu, \"skipped_points\": %llu, \"triangles\": %llu, \"cells\": %u, "
                 "\"forced_cells\": %u, \"degenerate_cells\": %u, \"layered_cells\": %u, \"outliers_removed\": %llu, "
                 "\"surface_samples\": %llu, "
-                "\"chunks\": %u, \"pages\": %u, \"page_width\": %u, \"page_height\": %u, "
+                "\"chunks\": %u, \"chunks_in_memory\": %u, \"pages\": %u, \"page_width\": %u, \"page_height\": %u, "
                 "\"texels\": %llu, \"texel_size\": %.9g, \"texel_min\": %.9g, \"texel_max\": %.9g, \"sample_spacing\": %.9g, \"area_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
                 "\"up_source\": \"%s\", \"bytes\": %llu, "
                 "\"bytes_per_point\": %.3f, \"scratch_bytes\": %llu, \"scratch_raw_bytes\": %llu, \"scratch_coded_bytes\": %llu, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
                 "\"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
                 (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.layeredCells,
-                (unsigned long long)sum.outliersRemoved, (unsigned long long)sum.surfaceSamples, sum.chunks, sum.pages, sum.pageWidth, sum.pageHeight,
+                (unsigned long long)sum.outliersRemoved, (unsigned long long)sum.surfaceSamples, sum.chunks, sum.chunksHeld, sum.pages, sum.pageWidth, sum.pageHeight,
                 (unsigned long long)sum.texels, sum.texelSize, sum.texelMin, sum.texelMax, sum.spacing, sum.areaSpacing, sum.up.x(), sum.up.y(), sum.up.z(),
                 upSourceName(sum.upSource),
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
@@ -305,7 +306,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                 sum.cpuSeconds[5], cores, sum.ranks, mpts);
   } else if (!sum.upToDate) {
     std::fprintf(stderr,
-                 "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)\n"
+                 "packed %s: %llu points%s%s -> %u cells (%u forced, %u of them layered), %u chunk(s)%s\n"
                  "  texels %llu (texel %.4g, %.4g-%.4g over cells; spacing %.4g) in %u page(s) of %ux%u, %s%s\n"
                  "  up %.3g,%.3g,%.3g (%s)\n"
                  "  file %.1f MiB (%.1f bytes/point), temporary files %.1f MiB written (chunks %.1f, coded tiles %.1f)\n"
@@ -314,7 +315,8 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                  out.c_str(), (unsigned long long)sum.pointsRead,
                  sum.pointsSkipped ? (" (" + std::to_string(sum.pointsSkipped) + " NaN/Inf skipped)").c_str() : "",
                  sum.outliersRemoved ? (" (" + std::to_string(sum.outliersRemoved) + " outliers removed)").c_str() : "",
-                 sum.cells, sum.forcedCells, sum.layeredCells, sum.chunks, (unsigned long long)sum.texels, sum.texelSize,
+                 sum.cells, sum.forcedCells, sum.layeredCells, sum.chunks, sum.chunksHeld ? " held in memory" : "",
+                 (unsigned long long)sum.texels, sum.texelSize,
                  sum.texelMin, sum.texelMax, sum.spacing, sum.pages, sum.pageWidth, sum.pageHeight,
                  sum.fromTriangles ? "heights rasterized from triangles" : "heights by pull-push",
                  sum.normalsEstimated ? ", normals estimated" : "", sum.up.x(), sum.up.y(), sum.up.z(),

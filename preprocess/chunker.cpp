@@ -283,10 +283,12 @@ ChunkInfo chunkInfoOf(const std::string& path, uint64_t id, uint64_t count) {
 // Buffers records per chunk node (nodeId) and appends them to the node's file when full. Full
 // buffers wait until a few per thread are full, are coded on every core and appended in the
 // order they filled: each file's bytes are those of appending them one at a time.
+// With `hold` records (DistributeOptions::inMemory), each node keeps its records in memory instead
+// (ChunkInfo::held), space for `hold` reserved when its first record comes.
 class ChunkFiles {
  public:
-  explicit ChunkFiles(const std::string& dir)
-      : dir_(dir), batch_(2 * size_t(std::max(1, tbb::this_task_arena::max_concurrency()))) {}
+  explicit ChunkFiles(const std::string& dir, uint64_t hold = 0)
+      : dir_(dir), batch_(2 * size_t(std::max(1, tbb::this_task_arena::max_concurrency()))), hold_(hold) {}
   std::string pathOf(uint64_t id) const {
     return joinPath(dir_, "chunk_L" + std::to_string(levelOfNode(id)) + "_" + std::to_string(keyOfNode(id)) + ".bin");
   }
@@ -296,10 +298,22 @@ class ChunkFiles {
       lastKey_ = key;
     }
     Node& n = *last_;
-    n.buf.push_back(p);
     ++n.count;
+    if (hold_) {
+      if (!n.held) {
+        n.held = std::make_shared<ChunkRecords>();
+        n.held->reserve(hold_);
+      }
+      n.held->push_back(p);
+      return Status::ok();
+    }
+    n.buf.push_back(p);
     if (n.buf.size() >= kFlush) return flush(key, n);
     return Status::ok();
+  }
+  std::shared_ptr<ChunkRecords> heldOf(uint64_t id) const {
+    const auto it = nodes_.find(id);
+    return it == nodes_.end() ? nullptr : it->second.held;
   }
   Status flushAll() {
     for (auto& [k, n] : nodes_) SA_RETURN_IF_ERROR(flush(k, n));
@@ -312,7 +326,11 @@ class ChunkFiles {
 
  private:
   static constexpr size_t kFlush = 8192;  // 288 KiB per open node
-  struct Node { std::vector<ChunkPoint> buf; uint64_t count = 0; };
+  struct Node {
+    std::vector<ChunkPoint> buf;
+    uint64_t count = 0;
+    std::shared_ptr<ChunkRecords> held;
+  };
   struct Full {
     uint64_t key;
     std::vector<ChunkPoint> buf;
@@ -345,6 +363,7 @@ class ChunkFiles {
   }
   std::string dir_;
   size_t batch_;
+  uint64_t hold_;
   std::map<uint64_t, Node> nodes_;
   std::vector<Full> pending_;
   Node* last_ = nullptr;
@@ -661,7 +680,9 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
     SA_RETURN_IF_ERROR(input.stream(hist, false));
     plan = std::make_unique<ChunkPlan>(planChunks(std::move(hist.counts()), planLevel, level, opt));
   }
-  ChunkFiles files(opt.scratchDir);
+  // In memory: one node (level 0), whose records passes A and B hold anyway.
+  const bool hold = opt.inMemory && !opt.keepTriangles && level == 0 && n <= opt.maxPointsPerChunk;
+  ChunkFiles files(opt.scratchDir, hold ? std::max<uint64_t>(n, 1) : 0);
   {
     DistributeSink sink(qz, opt, files, level, plan.get(), out, progress, n);
     SA_RETURN_IF_ERROR(input.stream(sink, opt.keepTriangles));
@@ -678,12 +699,17 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
     if (work.size() != counts.size())
       return Status::badInput(input.files()[0].path + ": the input changed while it was packed (its points per region differ between two reads)");
   } else {
-    for (const auto& [id, count] : counts) work.push_back(chunkInfoOf(files.pathOf(id), id, count));
+    for (const auto& [id, count] : counts) {
+      work.push_back(chunkInfoOf(files.pathOf(id), id, count));
+      work.back().held = files.heldOf(id);
+    }
   }
   while (!work.empty()) {
     ChunkInfo c = work.back();
     work.pop_back();
     if (c.count > opt.maxPointsPerChunk && c.level < opt.maxChunkLevel) {
+      if (c.held)  // held only when the first read counted few enough points
+        return Status::badInput(input.files()[0].path + ": the input changed while it was packed (it has more points than when they were counted)");
       SA_RETURN_IF_ERROR(splitChunk(c, opt.scratchDir, work));
     } else {
       out.chunks.push_back(c);
@@ -694,6 +720,13 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
 
 // Frames are read in batches, a few per thread, and decoded on every core into their places.
 Status loadChunk(const ChunkInfo& chunk, ChunkRecords& out) {
+  if (chunk.held) {
+    if (chunk.held->size() != chunk.count)
+      return Status::internal(chunk.path + ": the chunk held in memory was already handed over");
+    out.swap(*chunk.held);
+    ChunkRecords().swap(*chunk.held);
+    return Status::ok();
+  }
   out.clear();
   out.reserve(chunk.count);
   std::FILE* f = std::fopen(chunk.path.c_str(), "rb");
@@ -736,6 +769,12 @@ Status saveChunk(const std::string& path, std::span<const ChunkPoint> points) {
   Status st = writeFrames(f, path, points.data(), points.size());
   if (std::fclose(f) != 0 && st.isOk()) st = Status::internal(path + ": short write (disk full?)");
   return st;
+}
+
+Status saveChunk(const ChunkInfo& chunk, ChunkRecords&& points) {
+  if (!chunk.held) return saveChunk(chunk.path, points);
+  *chunk.held = std::move(points);
+  return Status::ok();
 }
 
 uint64_t chunkBytesWritten() { return gScratchBytes.load(); }

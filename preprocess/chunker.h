@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -87,6 +88,9 @@ struct ChunkInfo {
   uint64_t count = 0;
   int level = 0;              // octree level of the chunk's node
   uint32_t ix = 0, iy = 0, iz = 0;  // node coordinates at that level
+  // DistributeOptions::inMemory: the chunk's records, held in memory instead of in the file at
+  // `path` (never written). loadChunk hands them over; saveChunk gives them back.
+  std::shared_ptr<ChunkRecords> held;
 };
 
 using ProgressFn = std::function<void(const char* phase, uint64_t done, uint64_t total)>;
@@ -115,6 +119,11 @@ struct DistributeOptions {
   // so that every point goes straight to its final chunk and no chunk file is split (the same
   // chunks as splitting, in the same order).
   bool plan = true;
+  // A point input that fits one chunk (at most maxPointsPerChunk points) keeps its records in
+  // memory (ChunkInfo::held) instead of coding, writing and rereading a chunk file twice: the
+  // records are those passes A and B load anyway. One process only: a cluster's ranks read
+  // chunk files.
+  bool inMemory = false;
 };
 
 struct DistributeResult {
@@ -134,10 +143,13 @@ struct DistributeResult {
 Status distributePoints(const InputSet& input, const Quantizer& qz, const DistributeOptions& options,
                         DistributeResult& out, const ProgressFn& progress);
 
-// Reads a chunk file whole.
+// Reads a chunk file whole, or takes a held chunk's records (ChunkInfo::held; a second load
+// without a save between is an error).
 // Chunk files hold frames of byte-shuffled, zstd-compressed records (chunker.cpp).
 Status loadChunk(const ChunkInfo& chunk, ChunkRecords& out);
 Status saveChunk(const std::string& path, std::span<const ChunkPoint> points);
+// Writes the chunk's file, or hands a held chunk the records.
+Status saveChunk(const ChunkInfo& chunk, ChunkRecords&& points);
 // Bytes written to chunk files by this process so far (the summary's temporary bytes).
 uint64_t chunkBytesWritten();
 // The same records uncompressed (36 bytes each).

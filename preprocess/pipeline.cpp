@@ -212,10 +212,13 @@ Status distributePhase(PackJob& job, const std::string& outPath) {
   dopt.scratchDir = job.scratch.path();
   dopt.origin = job.origin;
   dopt.keepTriangles = job.triangles;
+  dopt.inMemory = !Cluster::distributed();
   SA_RETURN_IF_ERROR(distributePoints(job.input, job.qz, dopt, job.dist, job.progress));
   job.sum.triangles = job.dist.triangles;
   job.sum.surfaceSamples = job.dist.surfaceSamples;
   job.sum.chunks = static_cast<uint32_t>(job.dist.chunks.size());
+  job.sum.chunksHeld = static_cast<uint32_t>(
+      std::count_if(job.dist.chunks.begin(), job.dist.chunks.end(), [](const ChunkInfo& c) { return c.held != nullptr; }));
   timer.stop(job.sum, 1);
   if (job.triangles && job.dist.triangles == 0)
     return Status::badInput(job.input.files()[0].path + ": face element holds no triangles; use --as-points");
@@ -553,10 +556,9 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
       if (!job.triangles) sorted[i].vid = sorted[i].scan = 0;
     }
   });
-  SA_RETURN_IF_ERROR(saveChunk(ch.path, sorted));
   out.count = n;
   addCells(job.triangles, ci, oc, idx, pos, sorted, out);
-  return Status::ok();
+  return saveChunk(ch, std::move(sorted));
 }
 
 // ---- the ranks of a cluster pack (preprocess/cluster.h) ----
@@ -1340,7 +1342,7 @@ template <class IO>
 void rootState(IO& io, PackJob& job) {
   PackSummary& s = job.sum;
   io.io(s.pointsRead), io.io(s.pointsSkipped), io.io(s.warnings), io.io(s.inputHash), io.io(s.hashSeconds);
-  io.io(s.triangles), io.io(s.surfaceSamples), io.io(s.chunks), io.io(s.fromTriangles), io.io(s.normalsEstimated);
+  io.io(s.triangles), io.io(s.surfaceSamples), io.io(s.chunks), io.io(s.chunksHeld), io.io(s.fromTriangles), io.io(s.normalsEstimated);
   io.io(s.hasColor), io.io(s.upToDate), io.io(s.seconds), io.io(s.cpuSeconds), io.io(job.color);
   BoundsInfo& b = job.bounds;
   ioMatrix(io, b.min), ioMatrix(io, b.max), ioMatrix(io, b.centroid), ioMatrix(io, b.covariance);

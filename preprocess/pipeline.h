@@ -69,6 +69,7 @@ struct PackSummary {
   uint64_t pointsRead = 0, pointsSkipped = 0, triangles = 0, outliersRemoved = 0, surfaceSamples = 0;
   uint32_t cells = 0, forcedCells = 0, degenerateCells = 0, layeredCells = 0, pages = 0, chunks = 0;
   uint32_t pageWidth = 0, pageHeight = 0;
+  uint32_t chunksHeld = 0;  // chunks kept in memory instead of chunk files (DistributeOptions::inMemory)
   uint64_t texels = 0, fileBytes = 0;
   uint64_t scratchBytes = 0;     // written to temporary chunk files (compressed)
   uint64_t scratchRawBytes = 0;  // the same records uncompressed

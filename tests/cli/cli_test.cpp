@@ -744,20 +744,29 @@ nlohmann::json packSummary(const std::string& in, const std::string& out, const 
 }
 
 // Compressed pages are coded while the tiles are made: the temporaries are the chunks and the
-// coded tiles (about the pack's size, not the raw atlas), reported, and gone afterwards.
+// coded tiles (about the pack's size, not the raw atlas), reported, and gone afterwards. A point
+// input that fits one chunk keeps it in memory: no chunk file.
 TEST(Cli, PackReportsItsTemporariesAndLeavesNone) {
   test::TempDir d;
   const std::string las = test::sharedData("lidar/autzen_trim.las");
   const nlohmann::json zj = packSummary(las, d.file("z.hfa"), ""), rj = packSummary(las, d.file("raw.hfa"), "--raw-pages");
-  ASSERT_FALSE(zj.is_null() || rj.is_null());
+  const nlohmann::json cj = packSummary(las, d.file("c.hfa"), "--mem-budget 16M");  // 69905 points a chunk
+  ASSERT_FALSE(zj.is_null() || rj.is_null() || cj.is_null());
   const double coded = zj["scratch_coded_bytes"].get<double>(), bytes = zj["bytes"].get<double>();
-  std::printf("autzen: chunks %.0f bytes, coded tiles %.0f, pack %.0f\n", zj["scratch_bytes"].get<double>(), coded, bytes);
+  std::printf("autzen: chunks %.0f bytes (in memory), %.0f in %d chunks; coded tiles %.0f, pack %.0f\n",
+              zj["scratch_bytes"].get<double>(), cj["scratch_bytes"].get<double>(), cj["chunks"].get<int>(), coded, bytes);
   EXPECT_GT(coded, 0.5 * bytes);
   EXPECT_LT(coded, bytes);
   EXPECT_EQ(rj["scratch_coded_bytes"].get<double>(), 0) << "raw pages are written in place";
-  EXPECT_GT(zj["scratch_bytes"].get<double>(), 0);
+  EXPECT_EQ(zj["chunks"].get<int>(), 1);
+  EXPECT_EQ(zj["chunks_in_memory"].get<int>(), 1);
+  EXPECT_EQ(zj["scratch_bytes"].get<double>(), 0) << "one chunk, held in memory";
+  EXPECT_GT(cj["chunks"].get<int>(), 1);
+  EXPECT_EQ(cj["chunks_in_memory"].get<int>(), 0);
+  EXPECT_GT(cj["scratch_bytes"].get<double>(), 0) << "chunks in files";
   EXPECT_FALSE(anyTemporary(d.path()));
   EXPECT_EQ(run("verify " + d.file("z.hfa")).code, 0);
+  EXPECT_EQ(run("verify " + d.file("c.hfa")).code, 0);
 }
 
 // --zstd-level changes how hard the tiles are compressed, not what they hold: the default (6)

@@ -229,5 +229,67 @@ TEST(Distribute, PlannedChunksAreTheSplitChunksWrittenOnce) {
   EXPECT_GE(levels.size(), 2u) << "chunks at several levels";
 }
 
+// A point input that fits one chunk, distributed in memory, holds the records a chunk file
+// would: no file is written, loading hands them over once, saving gives them back. Past the
+// chunk's size the chunks are files as before.
+TEST(Distribute, OneChunkHeldInMemoryHoldsWhatItsFileWould) {
+  test::TempDir dir;
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 5000; ++i) pts.emplace_back(u(rng), u(rng), 0.05 * u(rng));
+  test::writePointsPly(dir.file("p.ply"), pts, nullptr);
+  auto in = InputSet::open({dir.file("p.ply")});
+  ASSERT_TRUE(in.isOk());
+  BoundsInfo b;
+  ASSERT_TRUE(computeBounds(*in, b, nullptr, false, false).isOk());
+  Quantizer qz;
+  qz.cubeSize = (b.max - b.min).maxCoeff() * 1.0001;
+  qz.cubeMin = Eigen::Vector3d::Constant(-qz.cubeSize / 2);
+  auto distribute = [&](const char* sub, bool inMemory, uint64_t maxPoints, std::vector<ChunkInfo>& chunks) {
+    DistributeOptions o;
+    o.maxPointsPerChunk = maxPoints;
+    o.origin = (b.min + b.max) / 2;
+    o.inMemory = inMemory;
+    std::filesystem::create_directory(dir.file(sub));
+    o.scratchDir = dir.file(sub);
+    DistributeResult r;
+    const Status s = distributePoints(*in, qz, o, r, nullptr);
+    ASSERT_TRUE(s.isOk()) << s.message();
+    chunks = r.chunks;
+  };
+  std::vector<ChunkInfo> files, held, over;
+  distribute("files", false, 8000, files);
+  const uint64_t written = chunkBytesWritten();
+  distribute("held", true, 8000, held);
+  EXPECT_EQ(chunkBytesWritten(), written) << "a held chunk writes nothing";
+  EXPECT_TRUE(std::filesystem::is_empty(dir.file("held")));
+  ASSERT_EQ(files.size(), 1u);
+  ASSERT_EQ(held.size(), 1u);
+  EXPECT_EQ(files[0].held, nullptr);
+  ASSERT_NE(held[0].held, nullptr);
+  EXPECT_EQ(held[0].count, files[0].count);
+  ChunkRecords a, c;
+  ASSERT_TRUE(loadChunk(files[0], a).isOk());
+  ASSERT_TRUE(loadChunk(held[0], c).isOk());
+  ASSERT_EQ(a.size(), pts.size());
+  ASSERT_EQ(c.size(), a.size());
+  EXPECT_EQ(std::memcmp(a.data(), c.data(), a.size() * sizeof(ChunkPoint)), 0);
+  const Status again = loadChunk(held[0], c);
+  EXPECT_FALSE(again.isOk()) << "a held chunk is handed over once";
+  // Pass A's rewrite: fewer records (outliers dropped), saved and loaded again.
+  a.resize(a.size() - 7);
+  a[0].vid = 12345;
+  ChunkRecords rewritten = a;
+  held[0].count = rewritten.size();
+  ASSERT_TRUE(saveChunk(held[0], std::move(rewritten)).isOk());
+  ASSERT_TRUE(loadChunk(held[0], c).isOk());
+  ASSERT_EQ(c.size(), a.size());
+  EXPECT_EQ(std::memcmp(a.data(), c.data(), a.size() * sizeof(ChunkPoint)), 0);
+  distribute("over", true, 1024, over);
+  ASSERT_GT(over.size(), 1u);
+  for (const ChunkInfo& ch : over) EXPECT_EQ(ch.held, nullptr) << "more than one chunk: files";
+}
+
 }  // namespace
 }  // namespace sa
