@@ -293,22 +293,33 @@ class ChunkFiles {
     return joinPath(dir_, "chunk_L" + std::to_string(levelOfNode(id)) + "_" + std::to_string(keyOfNode(id)) + ".bin");
   }
   Status add(uint64_t key, const ChunkPoint& p) {
-    if (!last_ || key != lastKey_) {  // points come in runs of one node (a scan's order, a split chunk's)
-      last_ = &nodes_[key];
-      lastKey_ = key;
-    }
-    Node& n = *last_;
+    Node& n = node(key);
     ++n.count;
     if (hold_) {
-      if (!n.held) {
-        n.held = std::make_shared<ChunkRecords>();
-        n.held->reserve(hold_);
-      }
       n.held->push_back(p);
       return Status::ok();
     }
     n.buf.push_back(p);
     if (n.buf.size() >= kFlush) return flush(key, n);
+    return Status::ok();
+  }
+  // A batch's records in order, to the nodes `keys` name (`skip`: to none). Held records of one
+  // node, none skipped (a batch of a one-chunk input without NaN): copied on every core, so
+  // that their first touch of the held chunk's pages is not on one core.
+  Status addBatch(const uint64_t* keys, const ChunkPoint* recs, size_t m, uint64_t skip) {
+    if (hold_ && m > 0 && keys[0] != skip && std::all_of(keys, keys + m, [&](uint64_t k) { return k == keys[0]; })) {
+      Node& n = node(keys[0]);
+      const size_t at = n.held->size();
+      n.held->resize(at + m);
+      ChunkPoint* dst = n.held->data() + at;
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        std::copy(recs + r.begin(), recs + r.end(), dst + r.begin());
+      });
+      n.count += m;
+      return Status::ok();
+    }
+    for (size_t i = 0; i < m; ++i)
+      if (keys[i] != skip) SA_RETURN_IF_ERROR(add(keys[i], recs[i]));
     return Status::ok();
   }
   std::shared_ptr<ChunkRecords> heldOf(uint64_t id) const {
@@ -337,6 +348,18 @@ class ChunkFiles {
     std::vector<uint8_t> coded;
     std::string error;
   };
+  // The node of `key`, with its held records' space reserved.
+  Node& node(uint64_t key) {
+    if (!last_ || key != lastKey_) {  // points come in runs of one node (a scan's order, a split chunk's)
+      last_ = &nodes_[key];
+      lastKey_ = key;
+    }
+    if (hold_ && !last_->held) {
+      last_->held = std::make_shared<ChunkRecords>();
+      last_->held->reserve(hold_);
+    }
+    return *last_;
+  }
   Status flush(uint64_t key, Node& n) {
     if (n.buf.empty()) return Status::ok();
     pending_.push_back({key, std::move(n.buf), {}, {}});
@@ -521,8 +544,7 @@ class DistributeSink : public BatchSink {
         chunkOf_[i] = nodeOf(p.q);
       }
     });
-    for (size_t i = 0; i < m; ++i)
-      if (chunkOf_[i] != kSkipped) SA_RETURN_IF_ERROR(files_.add(chunkOf_[i], recs_[i]));
+    SA_RETURN_IF_ERROR(files_.addBatch(chunkOf_.data(), recs_.data(), m, kSkipped));
     seen_ += m;
     if (progress_) progress_("distribute", plan_ ? total_ / 2 + seen_ / 2 : seen_, total_);
     return Status::ok();
