@@ -85,26 +85,63 @@ PlaneFit fitPlane(const double* pos, const float* nrm, const uint32_t* idx, size
   return f;
 }
 
+namespace {
+
+// Whether heights h[0..m) (a bin's, in any order) leave a gap wider than `gap` once sorted. A bin
+// whose range is at most the gap has none; two heights are their range apart; only the rest are
+// sorted (scratch).
+bool binSplits(const double* h, size_t m, double gap, std::vector<double>& scratch) {
+  if (m < 2) return false;
+  const auto [lo, hi] = std::minmax_element(h, h + m);
+  if (!(*hi - *lo > gap)) return false;
+  if (m == 2) return true;
+  scratch.assign(h, h + m);
+  std::sort(scratch.begin(), scratch.end());
+  for (size_t k = 1; k < m; ++k)
+    if (scratch[k] - scratch[k - 1] > gap) return true;
+  return false;
+}
+
+}  // namespace
+
 uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, const PlaneFit& f, double bin,
                           double gap, uint32_t enough) {
   if (!(bin > 0) || !(gap > 0) || n < 2) return 0;
-  // (bin key, height) for every point, grouped by key; keys from bin coordinates relative to
-  // the centroid (a cell spans at most a few million bins per side).
-  std::vector<std::pair<uint64_t, double>> e(n);
+  // Every point's bin coordinates relative to the centroid (a cell spans at most a few million
+  // bins per side) and height.
+  std::vector<int64_t> bu(n), bv(n);
+  std::vector<double> h(n);
   for (size_t i = 0; i < n; ++i) {
     if (i + 16 < n) __builtin_prefetch(&pos[3 * size_t(idx[i + 16])]);  // as fitPlane
     const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * size_t(idx[i])]) - f.centroid;
-    const int64_t bu = static_cast<int64_t>(std::floor(d.dot(f.u) / bin)) + (int64_t(1) << 31);
-    const int64_t bv = static_cast<int64_t>(std::floor(d.dot(f.v) / bin)) + (int64_t(1) << 31);
-    e[i] = {(uint64_t(bu) << 32) ^ uint64_t(bv & 0xffffffff), d.dot(f.w)};
+    bu[i] = static_cast<int64_t>(std::floor(d.dot(f.u) / bin));
+    bv[i] = static_cast<int64_t>(std::floor(d.dot(f.v) / bin));
+    h[i] = d.dot(f.w);
   }
-  std::sort(e.begin(), e.end());
+  // The points grouped by bin: counted into the bins of their box when it has few enough (a
+  // point cell's box holds about a bin per point or two), else sorted by bin.
+  const auto [u0, u1] = std::minmax_element(bu.begin(), bu.end());
+  const auto [v0, v1] = std::minmax_element(bv.begin(), bv.end());
+  const uint64_t W = uint64_t(*u1 - *u0) + 1, H = uint64_t(*v1 - *v0) + 1;
+  std::vector<uint32_t> order(n), start;
+  std::vector<uint64_t> key(n);
+  if (W <= 4 * n && H <= 4 * n && W * H <= 4 * n + 64) {
+    start.assign(W * H + 1, 0);
+    for (size_t i = 0; i < n; ++i) ++start[(key[i] = uint64_t(bv[i] - *v0) * W + uint64_t(bu[i] - *u0)) + 1];
+    for (size_t b = 0; b < W * H; ++b) start[b + 1] += start[b];
+    std::vector<uint32_t> at(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < n; ++i) order[at[key[i]]++] = uint32_t(i);
+  } else {
+    for (size_t i = 0; i < n; ++i) key[i] = (uint64_t(bu[i] - *u0) << 32) ^ uint64_t(bv[i] - *v0), order[i] = uint32_t(i);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
+  }
   uint32_t layered = 0;
+  std::vector<double> hs, scratch;
   for (size_t a = 0; a < n && layered < enough;) {
-    size_t b = a + 1;
-    bool split = false;
-    for (; b < n && e[b].first == e[a].first; ++b) split |= e[b].second - e[b - 1].second > gap;
-    layered += split;
+    size_t b = a;
+    hs.clear();
+    for (; b < n && key[order[b]] == key[order[a]]; ++b) hs.push_back(h[order[b]]);
+    layered += binSplits(hs.data(), hs.size(), gap, scratch);
     a = b;
   }
   return layered;

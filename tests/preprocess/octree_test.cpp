@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
+#include <map>
 #include <random>
 
 #include "../common/test_util.h"
@@ -70,6 +73,61 @@ TEST(Octree, PartitionBelowIsStdPartitionsOrder) {
         ASSERT_EQ(want, got) << n << " points, axis " << axis << ", mid " << mid;
       }
   }
+}
+
+// countLayeredBins against its definition (points grouped by square bin of the fit's plane, a
+// bin layered when its sorted heights leave a gap wider than `gap`, counted up to `enough`), on
+// sheets with a second layer over part of them, in a tilted frame: bins of one point, of two,
+// of many; boxes of few bins per point (counted into bins) and of many (sorted).
+TEST(Octree, LayeredBinsAreCountedAsDefined) {
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> u(0, 1);
+  PlaneFit f;
+  f.centroid = Eigen::Vector3d(0.3, -0.2, 0.1);
+  f.u = Eigen::Vector3d(1, 1, 0).normalized();
+  f.w = Eigen::Vector3d(0.2, -0.2, 1).normalized();
+  f.v = f.w.cross(f.u).normalized();
+  f.u = f.v.cross(f.w);
+  int trials = 0, counted = 0, capped = 0;
+  for (size_t n : {size_t(2), size_t(3), size_t(17), size_t(200), size_t(3000)})
+    for (double bin : {0.01, 0.05, 0.3})
+      for (int spread : {1, 20}) {
+        std::vector<double> pos;
+        for (size_t i = 0; i < n; ++i) {
+          const double a = spread * u(rng), b = u(rng), over = (a < 0.5 * spread && u(rng) < 0.4) ? 0.2 : 0.0;
+          const Eigen::Vector3d p = f.centroid + f.u * a + f.v * b + f.w * (0.02 * u(rng) + over);
+          pos.insert(pos.end(), p.data(), p.data() + 3);
+        }
+        std::vector<uint32_t> idx(n);
+        for (uint32_t i = 0; i < n; ++i) idx[i] = i;
+        std::shuffle(idx.begin(), idx.end(), rng);
+        std::map<std::pair<int64_t, int64_t>, std::vector<double>> bins;
+        for (uint32_t i : idx) {
+          const Eigen::Vector3d d = Eigen::Vector3d(&pos[3 * i]) - f.centroid;
+          bins[{int64_t(std::floor(d.dot(f.u) / bin)), int64_t(std::floor(d.dot(f.v) / bin))}].push_back(d.dot(f.w));
+        }
+        for (double gap : {0.05, 0.15}) {
+          uint32_t want = 0;
+          for (auto& [k, hs] : bins) {
+            std::sort(hs.begin(), hs.end());
+            for (size_t j = 1; j < hs.size(); ++j)
+              if (hs[j] - hs[j - 1] > gap) {
+                ++want;
+                break;
+              }
+          }
+          for (uint32_t enough : {1u, 3u, 1000000u}) {
+            const uint32_t got = countLayeredBins(pos.data(), idx.data(), n, f, bin, gap, enough);
+            ASSERT_EQ(got, std::min(want, enough)) << n << " points, bin " << bin << ", spread " << spread << ", gap " << gap;
+            ++trials;
+            counted += want > 0;
+            capped += want > enough;
+          }
+        }
+      }
+  std::printf("%d trials, %d with layered bins, %d capped\n", trials, counted, capped);
+  EXPECT_GT(counted, trials / 4);
+  EXPECT_GT(capped, 0);
 }
 
 TEST(Octree, TiltedPlaneIsOneCell) {
