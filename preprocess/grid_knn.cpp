@@ -379,8 +379,8 @@ double GridKnn::reach(const double* p, const int64_t c[3], int ring) const {
   return g;
 }
 
-std::vector<float> GridKnn::blockRank(const float* value, size_t t) const {
-  std::vector<float> out(n_);
+RawVector<float> GridKnn::blockRank(const float* value, size_t t) const {
+  RawVector<float> out(n_);  // not zeroed: the cells hold every point, each written once below
   tbb::parallel_for(tbb::blocked_range<size_t>(0, cells_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
     std::vector<float> v;
     for (size_t ci = r.begin(); ci != r.end(); ++ci) {

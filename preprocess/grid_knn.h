@@ -55,7 +55,7 @@ class GridKnn {
   // the 3x3x3 block of cells around its cell, or -infinity where the block holds t points or
   // fewer. Any more than t of its neighbours within blockReach(i) have their t-th smallest at
   // least this.
-  std::vector<float> blockRank(const float* value, size_t t) const;
+  RawVector<float> blockRank(const float* value, size_t t) const;
   // How far point i lies from the outside of the 3x3x3 block of cells around its cell (infinite
   // where the block reaches the grid's edge on both sides of every axis): every point within
   // that distance of it is in the block.

@@ -7,6 +7,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
@@ -203,13 +204,14 @@ struct NeighbourLists {
     v.insert(v.end(), size_t(k - m), -1);
     return true;
   }
-  // Every record as (point, its list), ordered by point (threads append in any order).
+  // Every record as (point, its list), ordered by point (threads append in any order; a point
+  // has one record, so the order is the same on any number of cores).
   std::vector<std::pair<uint32_t, const int*>> sorted() const {
     std::vector<std::pair<uint32_t, const int*>> recs;
     for (const std::vector<std::vector<int>>& blocks : perThread)
       for (const std::vector<int>& v : blocks)
         for (size_t r = 0; r < v.size(); r += size_t(k) + 1) recs.emplace_back(uint32_t(v[r]), &v[r + 1]);
-    std::sort(recs.begin(), recs.end());
+    tbb::parallel_sort(recs.begin(), recs.end());
     return recs;
   }
 };
@@ -305,7 +307,7 @@ void markOutliers(const GridKnn& grid, const std::vector<float>& density, const 
   // A point's median is the (c / 2)-th smallest of its c = k - 1 neighbours' densities (the list
   // less its first entry), no less than the same rank over its whole block.
   const size_t c = std::min(size_t(k), n) - 1;
-  const std::vector<float> low = grid.blockRank(density.data(), c / 2);
+  const RawVector<float> low = grid.blockRank(density.data(), c / 2);
   auto test = [&](size_t i, const int* ind, size_t m, std::vector<float>& around) {
     around.clear();
     for (size_t j = 1; j < m; ++j)

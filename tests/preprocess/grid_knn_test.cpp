@@ -187,7 +187,7 @@ TEST(GridKnn, BlockRankBoundsEveryNeighbourhoodWithinReach) {
   for (double cell : {0.01, 0.05, 0.3}) {
     const GridKnn g(pos.data(), n, cell);
     for (size_t t : {size_t(0), size_t(11)}) {
-      const std::vector<float> low = g.blockRank(value.data(), t);
+      const RawVector<float> low = g.blockRank(value.data(), t);
       ASSERT_EQ(low.size(), n);
       size_t tight = 0, bounded = 0;
       for (size_t i = 0; i < n; i += 7) {
