@@ -119,7 +119,8 @@ uint32_t countLayeredBins(const double* pos, const uint32_t* idx, size_t n, cons
     h[i] = d.dot(f.w);
   }
   // The points grouped by bin: counted into the bins of their box when it has few enough (a
-  // point cell's box holds about a bin per point or two), else sorted by bin.
+  // point cell's bins are two sample spacings wide: its box holds fewer bins than points), else
+  // sorted by bin.
   const auto [u0, u1] = std::minmax_element(bu.begin(), bu.end());
   const auto [v0, v1] = std::minmax_element(bv.begin(), bv.end());
   const uint64_t W = uint64_t(*u1 - *u0) + 1, H = uint64_t(*v1 - *v0) + 1;
