@@ -171,6 +171,21 @@ TEST(ChunkFile, DamagedOrMiscountedFilesAreErrorsNamingTheFile) {
   expectError(dir.file("missing.bin"), 10, "missing file");
 }
 
+// `pts` written to dir/p.ply and opened.
+Result<InputSet> openPly(const test::TempDir& dir, const std::vector<Eigen::Vector3d>& pts) {
+  test::writePointsPly(dir.file("p.ply"), pts, nullptr);
+  return InputSet::open({dir.file("p.ply")});
+}
+
+// The input's bounds and a quantizer over them, as the pipeline makes one.
+Quantizer quantizerOf(const InputSet& in, BoundsInfo& b) {
+  EXPECT_TRUE(computeBounds(in, b, nullptr, false, false).isOk());
+  Quantizer qz;
+  qz.cubeSize = (b.max - b.min).maxCoeff() * 1.0001;
+  qz.cubeMin = Eigen::Vector3d::Constant(-qz.cubeSize / 2);
+  return qz;
+}
+
 // Distributing with a plan (a counting read first) ends with the chunks that splitting over-full
 // chunk files ends with: the same nodes, counts, order and records, each record written once.
 TEST(Distribute, PlannedChunksAreTheSplitChunksWrittenOnce) {
@@ -181,14 +196,10 @@ TEST(Distribute, PlannedChunksAreTheSplitChunksWrittenOnce) {
   std::vector<Eigen::Vector3d> pts;
   for (int i = 0; i < 60000; ++i) pts.emplace_back(0.2 * u(rng), 0.2 * u(rng), 0.01 * u(rng));
   for (int i = 0; i < 20000; ++i) pts.emplace_back(u(rng), u(rng), 0.05 * u(rng));
-  test::writePointsPly(dir.file("p.ply"), pts, nullptr);
-  auto in = InputSet::open({dir.file("p.ply")});
+  auto in = openPly(dir, pts);
   ASSERT_TRUE(in.isOk());
   BoundsInfo b;
-  ASSERT_TRUE(computeBounds(*in, b, nullptr, false, false).isOk());
-  Quantizer qz;
-  qz.cubeSize = (b.max - b.min).maxCoeff() * 1.0001;
-  qz.cubeMin = Eigen::Vector3d::Constant(-qz.cubeSize / 2);
+  const Quantizer qz = quantizerOf(*in, b);
   std::vector<ChunkInfo> chunks[2];
   uint64_t records[2];
   for (int planned = 0; planned < 2; ++planned) {
@@ -238,14 +249,10 @@ TEST(Distribute, OneChunkHeldInMemoryHoldsWhatItsFileWould) {
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<Eigen::Vector3d> pts;
   for (int i = 0; i < 5000; ++i) pts.emplace_back(u(rng), u(rng), 0.05 * u(rng));
-  test::writePointsPly(dir.file("p.ply"), pts, nullptr);
-  auto in = InputSet::open({dir.file("p.ply")});
+  auto in = openPly(dir, pts);
   ASSERT_TRUE(in.isOk());
   BoundsInfo b;
-  ASSERT_TRUE(computeBounds(*in, b, nullptr, false, false).isOk());
-  Quantizer qz;
-  qz.cubeSize = (b.max - b.min).maxCoeff() * 1.0001;
-  qz.cubeMin = Eigen::Vector3d::Constant(-qz.cubeSize / 2);
+  const Quantizer qz = quantizerOf(*in, b);
   auto distribute = [&](const char* sub, bool inMemory, uint64_t maxPoints, std::vector<ChunkInfo>& chunks) {
     DistributeOptions o;
     o.maxPointsPerChunk = maxPoints;
