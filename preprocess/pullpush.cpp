@@ -236,6 +236,7 @@ void splat(const TileGrid& g, const TileSamples& s, const std::vector<double>& t
            Level& L) {
   const int W = g.width, H = g.height, C = ch.count;
   double gu = 0, gv = 0;  // the current sample's slope
+  std::vector<double> across(size_t(std::max(W, 0))), plane(size_t(std::max(W, 0)));
   auto add = [&](size_t i, int x, int y, double wt) {
     const size_t t = size_t(y) * W + x;
     const double tu = g.u0 + (x + 0.5) * g.du, tv = g.v0 + (y + 0.5) * g.dv;
@@ -271,11 +272,23 @@ void splat(const TileGrid& g, const TileSamples& s, const std::vector<double>& t
     if (!(fx > -rx - 1 && fy > -ry - 1 && fx < W + rx && fy < H + ry)) continue;
     const int y0 = std::max(0, static_cast<int>(std::ceil(fy - ry))), y1 = std::min(H - 1, static_cast<int>(std::floor(fy + ry)));
     const int x0 = std::max(0, static_cast<int>(std::ceil(fx - rx))), x1 = std::min(W - 1, static_cast<int>(std::floor(fx + rx)));
+    // The kernel's and the tangent plane's terms that depend on the column alone, once per
+    // column: the same expressions as add's and the loop's, so the same sums.
+    for (int x = x0; x <= x1; ++x) {
+      const double dx = (x - fx) / rx, tu = g.u0 + (x + 0.5) * g.du;
+      across[x] = 1 - dx * dx;
+      plane[x] = s.w[i] + gu * (tu - s.u[i]);
+    }
     for (int y = y0; y <= y1; ++y) {
-      const double dy = (y - fy) / ry;
+      const double dy = (y - fy) / ry, tv = g.v0 + (y + 0.5) * g.dv, dv = gv * (tv - s.v[i]);
       for (int x = x0; x <= x1; ++x) {
-        const double dx = (x - fx) / rx, q = 1 - dx * dx - dy * dy;
-        if (q > 0) add(i, x, y, q * q);
+        const double q = across[x] - dy * dy;
+        if (!(q > 0)) continue;
+        const double wt = q * q;
+        const size_t t = size_t(y) * W + x;
+        L.weight[t] += float(wt);
+        L.value[t] += wt * (plane[x] + dv - trendAt[t]);
+        if (C) ch.add(s, i, wt, &L.attr[t * C]);
       }
     }
   }
