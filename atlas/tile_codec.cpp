@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "atlas/zstd_context.h"
+#include "common/raw_vector.h"
 
 namespace sa {
 namespace {
@@ -194,9 +195,9 @@ void scatter(const uint8_t* g, Level L, uint32_t w, size_t tb, uint8_t* t) {
 }
 
 // One level as a tight grid: its values, its coverage and its rebuild from the level above
-// (upsampleEven over the grid).
+// (upsampleEven over the grid). Made without zeroing: levelOf writes every byte of each.
 struct LevelGrids {
-  std::vector<uint8_t> values, cov, rebuilt;
+  RawVector<uint8_t> values, cov, rebuilt;
 };
 
 // The texels of level L that are not on the level above (not at an even column and row).
