@@ -173,10 +173,13 @@ std::vector<uint8_t> withGutter(const uint8_t* src, uint32_t w, uint32_t h, size
 
 }  // namespace
 
-Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba) {
+Status PackWriter::writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba,
+                             std::span<const uint8_t> normalPyramid, std::span<const uint8_t> rgbaPyramid) {
   if (!(meta_.flags & kPackHasNormals)) normals = nullptr;
   if (!(meta_.flags & kPackHasColor)) rgba = nullptr;
-  return compress_ ? writeCodedTile(cellIndex, heights, normals, rgba) : writeRawTile(cellIndex, heights, normals, rgba);
+  return compress_ ? writeCodedTile(cellIndex, heights, normals, rgba, normals ? normalPyramid : std::span<const uint8_t>{},
+                                    rgba ? rgbaPyramid : std::span<const uint8_t>{})
+                   : writeRawTile(cellIndex, heights, normals, rgba);
 }
 
 Status PackWriter::writeRawTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba) {
@@ -206,12 +209,14 @@ Status PackWriter::writeRawTile(uint32_t cellIndex, const uint16_t* heights, con
 // temporary, and (storeLevels) its stored coarser levels; a layer the pack has but the call
 // lacks is coded as zeros, as raw pages hold it.
 Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals,
-                                  const uint8_t* rgba) {
+                                  const uint8_t* rgba, std::span<const uint8_t> normalPyramid,
+                                  std::span<const uint8_t> rgbaPyramid) {
   const CellRecord& c = cells_[cellIndex];
   const TileRegion whole{0, 0, c.tileW + 2u, c.tileH + 2u};
   const uint8_t* src[3] = {reinterpret_cast<const uint8_t*>(heights), normals, rgba};
   const bool present[3] = {true, (meta_.flags & kPackHasNormals) != 0, (meta_.flags & kPackHasColor) != 0};
   const TexelLayout layouts[3] = {kHeightTexels, kNormalTexels, kColorTexels};
+  const std::span<const uint8_t> pyramids[3] = {{}, normalPyramid, rgbaPyramid};
   TileImage level0;  // the tile as a reader decodes it, for its coarser levels
   level0.w = c.tileW;
   level0.h = c.tileH;
@@ -225,7 +230,7 @@ Status PackWriter::writeCodedTile(uint32_t cellIndex, const uint16_t* heights, c
     if (!present[l]) continue;
     std::vector<uint8_t> t = withGutter(src[l], c.tileW, c.tileH, size_t(layouts[l].texelBytes()));
     const TileForm form = l == 1 ? normalForm_ : TileForm::kSmaller;
-    SA_RETURN_IF_ERROR(append(encodeTile(t.data(), whole.w, whole, layouts[l], level_, form), l));
+    SA_RETURN_IF_ERROR(append(encodeTile(t.data(), whole.w, whole, layouts[l], level_, form, pyramids[l]), l));
     if (!storeLevels_) continue;
     if (l == 0) {
       level0.heights.resize(t.size() / 2);

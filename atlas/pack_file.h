@@ -47,7 +47,10 @@ class PackWriter {
   // (kNormalBytes per texel; may be null when the pack has no normal pages) and colours (4 bytes; may be null
   // when the pack has no colour). Compressed pages: codes the tile at once (tile_codec.h) and
   // appends it to the temporary, so raw pages are never written. Thread-safe for different cells.
-  Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
+  // normalPyramid, rgbaPyramid: those layers' pyramid payloads where snapToPyramid made them
+  // (encodeTile's `pyramid`), empty where not.
+  Status writeTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba,
+                   std::span<const uint8_t> normalPyramid = {}, std::span<const uint8_t> rgbaPyramid = {});
   // Widens a cell's height range before its tile is written (not thread-safe for the same
   // cell; different cells may be updated concurrently).
   void setCellHeights(uint32_t cellIndex, double wMin, double wMax) {
@@ -88,7 +91,8 @@ class PackWriter {
  private:
   void layOut(const PackMeta& meta, std::vector<CellRecord> cells, const std::string& note);
   Status writeRawTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
-  Status writeCodedTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba);
+  Status writeCodedTile(uint32_t cellIndex, const uint16_t* heights, const uint8_t* normals, const uint8_t* rgba,
+                        std::span<const uint8_t> normalPyramid, std::span<const uint8_t> rgbaPyramid);
   Status finishCompressed();
   Status copySection(AtomicFile& out, const std::vector<int>& fds, int layer, const char* id, uint64_t off,
                      SectionEntry& entry);

@@ -256,9 +256,31 @@ void applyOdd(const uint8_t* planes, Level L, TexelLayout layout, LevelGrids& g)
   }
 }
 
+// The pyramid payload's head: the coverage mask (a bit a texel, row-major) and the coarsest
+// level's residual planes.
+std::vector<uint8_t> pyramidHead(const uint8_t* in, const uint8_t* cov, uint32_t iw, uint32_t ih,
+                                 const std::vector<Level>& lv, TexelLayout layout) {
+  const size_t tb = size_t(layout.texelBytes()), n = size_t(iw) * ih;
+  std::vector<uint8_t> payload((n + 7) / 8, 0);
+  for (size_t k = 0; k < n; ++k) payload[k / 8] |= uint8_t(uint8_t(cov[k] != 0) << (k % 8));
+  const Level& top = lv.back();
+  std::vector<uint8_t> grid(size_t(top.w) * top.h * tb);
+  gather(in, iw, top, tb, grid.data());
+  const std::vector<uint8_t> coarse = residualPlanes(grid.data(), top.w, {0, 0, top.w, top.h}, layout);
+  payload.insert(payload.end(), coarse.begin(), coarse.end());
+  return payload;
+}
+
+// Whether a texel is covered as the pyramid's mask has it: any byte not zero.
+std::vector<uint8_t> coverOf(const uint8_t* in, size_t n, size_t tb) {
+  std::vector<uint8_t> cov(n);
+  for (size_t k = 0; k < n; ++k) cov[k] = std::any_of(in + k * tb, in + (k + 1) * tb, [](uint8_t b) { return b != 0; });
+  return cov;
+}
+
 // The pyramid payload of region r, before zstd (empty for a tile too small for a level or a
-// gutter that does not repeat the tile): the coverage mask, the coarsest level's residual planes,
-// then each finer level's other texels against their rebuild from the level above.
+// gutter that does not repeat the tile): the head, then each finer level's other texels against
+// their rebuild from the level above.
 std::vector<uint8_t> pyramidPayload(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout) {
   if (r.w < 3 || r.h < 3) return {};
   const size_t tb = size_t(layout.texelBytes());
@@ -266,17 +288,8 @@ std::vector<uint8_t> pyramidPayload(const uint8_t* page, uint32_t pageWidth, Til
   const uint32_t iw = r.w - 2, ih = r.h - 2;
   const std::vector<Level> lv = levelsOf(iw, ih);
   if (in.empty() || lv.size() < 2) return {};
-  const size_t n = size_t(iw) * ih, maskBytes = (n + 7) / 8;
-  std::vector<uint8_t> cov(n), payload(maskBytes, 0);
-  for (size_t k = 0; k < n; ++k) {
-    cov[k] = std::any_of(in.begin() + k * tb, in.begin() + (k + 1) * tb, [](uint8_t b) { return b != 0; });
-    payload[k / 8] |= uint8_t(cov[k] << (k % 8));
-  }
-  const Level& top = lv.back();
-  std::vector<uint8_t> grid(size_t(top.w) * top.h * tb);
-  gather(in.data(), iw, top, tb, grid.data());
-  const std::vector<uint8_t> coarse = residualPlanes(grid.data(), top.w, {0, 0, top.w, top.h}, layout);
-  payload.insert(payload.end(), coarse.begin(), coarse.end());
+  const std::vector<uint8_t> cov = coverOf(in.data(), size_t(iw) * ih, tb);
+  std::vector<uint8_t> payload = pyramidHead(in.data(), cov.data(), iw, ih, lv, layout);
   for (size_t l = lv.size() - 1; l-- > 0;) {
     LevelGrids g = levelOf(in.data(), cov.data(), iw, lv[l], layout);
     encodeOdd(g, lv[l], layout, payload);
@@ -431,33 +444,45 @@ void upsampleEven(const uint8_t* src, const uint8_t* covered, uint32_t w, uint32
 }
 
 size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout,
-                     const std::function<bool(const uint8_t*, const uint8_t*)>& close) {
-  const size_t tb = size_t(layout.texelBytes());
+                     const std::function<bool(const uint8_t*, const uint8_t*)>& close, std::vector<uint8_t>* payload) {
+  const size_t tb = size_t(layout.texelBytes()), n = size_t(w) * h;
   const std::vector<Level> lv = levelsOf(w, h);
+  // The payload is pyramidPayload's where its mask (texels of any byte not zero) is `covered`:
+  // the level grids below are then the ones it makes.
+  bool build = payload && n > 0 && lv.size() >= 2;
+  if (payload) payload->clear();
+  if (build) {
+    const std::vector<uint8_t> cov = coverOf(texels, n, tb);
+    for (size_t k = 0; k < n && build; ++k) build = cov[k] == (covered[k] != 0);
+  }
+  if (build) *payload = pyramidHead(texels, covered, w, h, lv, layout);  // the coarsest level is never snapped
   size_t snapped = 0;
   for (size_t l = lv.size() - 1; l-- > 0;) {
     const Level L = lv[l];
-    const LevelGrids g = levelOf(texels, covered, w, L, layout);
+    LevelGrids g = levelOf(texels, covered, w, L, layout);
     for (uint32_t j = 0; j < L.h; ++j)
       for (uint32_t i = 0; i < L.w; ++i) {
         const size_t k = size_t(j) * L.w + i;
-        const uint8_t *a = &g.values[k * tb], *b = &g.rebuilt[k * tb];
+        uint8_t *a = &g.values[k * tb], *b = &g.rebuilt[k * tb];
         if ((!(i & 1) && !(j & 1)) || !g.cov[k] || sameTexel(a, b, tb)) continue;
         if (std::all_of(b, b + tb, [](uint8_t x) { return x == 0; }) || !close(a, b)) continue;
         copyTexel(texels + (size_t(j) * L.step * w + size_t(i) * L.step) * tb, b, tb);
+        copyTexel(a, b, tb);  // the level as it now is (finer levels never move its texels)
         ++snapped;
       }
+    if (build) encodeOdd(g, L, layout, *payload);
   }
   return snapped;
 }
 
 std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout, int level,
-                                TileForm form) {
+                                TileForm form, std::span<const uint8_t> pyramid) {
   // heights: LOCO-I alone was as small on the 2 M-point survey
   if (layout.comps == 1) return compress(residualPlanes(page, pageWidth, r, layout), level);
   // Normals and colours: the pyramid or LOCO-I, whichever codes smaller (both decode to the
   // same texels), judged by quickSize; snapped texels: the pyramid.
-  const std::vector<uint8_t> payload = pyramidPayload(page, pageWidth, r, layout);
+  const std::vector<uint8_t> payload =
+      pyramid.empty() ? pyramidPayload(page, pageWidth, r, layout) : std::vector<uint8_t>(pyramid.begin(), pyramid.end());
   if (!payload.empty() && form == TileForm::kPyramid) return pyramidBlob(payload, level);
   const std::vector<uint8_t> planes = residualPlanes(page, pageWidth, r, layout);
   if (!payload.empty() && quickSize(payload) < quickSize(planes)) return pyramidBlob(payload, level);

@@ -50,9 +50,13 @@ struct TileRegion {
 // level above, coarsest level first, wherever `close(before, after)` accepts the change and the
 // texel is covered with a covered neighbour on that level: the pyramid blob then holds a zero
 // for it. The even/even texels of the coarsest level keep their values. Returns the texels
-// changed.
+// changed. Where `payload` is given it is set to the snapped tile's pyramid payload, the bytes
+// encodeTile would make for the tile from its texels (pass it there): the levels are built here
+// anyway. It is left empty where those would not be the same bytes (a covered texel whose bytes
+// are all zero, or an uncovered one that has some) or the tile has no pyramid.
 size_t snapToPyramid(uint8_t* texels, const uint8_t* covered, uint32_t w, uint32_t h, TexelLayout layout,
-                     const std::function<bool(const uint8_t*, const uint8_t*)>& close);
+                     const std::function<bool(const uint8_t*, const uint8_t*)>& close,
+                     std::vector<uint8_t>* payload = nullptr);
 
 // zstd's level for the coded tiles, unless the writer is told otherwise (pack --zstd-level): on
 // the 2 M-point survey 6 gave 5.4 % fewer bytes than 1 for 8.5 % more packing time; decoding
@@ -70,8 +74,11 @@ inline constexpr int kMaxTileLevel = 19;
 enum class TileForm { kSmaller, kPyramid };
 
 // Codes region r of `page` (row-major, pageWidth texels per row) at zstd level `level`.
+// `pyramid`: the region's pyramid payload when snapToPyramid made it for the same texels (the
+// region then holds the tile and a gutter repeating it); empty: made here.
 std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout,
-                                int level = kDefaultTileLevel, TileForm form = TileForm::kSmaller);
+                                int level = kDefaultTileLevel, TileForm form = TileForm::kSmaller,
+                                std::span<const uint8_t> pyramid = {});
 // Decodes `blob` into region r of `page`; an error when the blob is not a tile of that size.
 Status decodeTile(std::span<const uint8_t> blob, uint8_t* page, uint32_t pageWidth, TileRegion r, TexelLayout layout);
 

@@ -1047,6 +1047,8 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, std::span<c
 // The precision the options keep (PackOptions::heightStep and the tolerances): what the page
 // coder then stores in fewer bytes.
 void reducePrecision(const Precision& p, const TileGrid& g, TileOutput& tile) {
+  tile.normalPyramid.clear();
+  tile.rgbaPyramid.clear();
   if (p.heightStep > 0) roundHeights(tile, p.heightStep * std::min(g.du, g.dv));
   if (p.normalTolerance > 0) snapNormals(tile, g.width, g.height, p.normalTolerance);
   if (p.colourTolerance > 0) snapColours(tile, g.width, g.height, p.colourTolerance);
@@ -1155,7 +1157,8 @@ Status chunkTiles(PackJob& job, uint32_t ci, const std::vector<uint32_t>& mine, 
     }
     reducePrecision(precision, g, tile);
     return writer.writeTile(id, tile.heights.data(), tile.normals.empty() ? nullptr : tile.normals.data(),
-                            withColor ? tile.rgba.data() : nullptr);
+                            withColor ? tile.rgba.data() : nullptr, tile.normalPyramid,
+                            withColor ? std::span<const uint8_t>(tile.rgbaPyramid) : std::span<const uint8_t>{});
   };
   tbb::parallel_for(tbb::blocked_range<size_t>(0, mine.size(), 1), [&](const tbb::blocked_range<size_t>& rr) {
     for (size_t m = rr.begin(); m < rr.end(); ++m) {

@@ -459,11 +459,12 @@ namespace {
 
 // snapToPyramid over the tile's covered texels.
 size_t snap(std::vector<uint8_t>& texels, const std::vector<uint16_t>& heights, int W, int H, TexelLayout layout,
-            const std::function<bool(const uint8_t*, const uint8_t*)>& close) {
+            const std::function<bool(const uint8_t*, const uint8_t*)>& close, std::vector<uint8_t>& payload) {
+  payload.clear();
   if (texels.empty()) return 0;
   std::vector<uint8_t> cov(heights.size());
   for (size_t k = 0; k < heights.size(); ++k) cov[k] = heights[k] != 0;
-  return snapToPyramid(texels.data(), cov.data(), uint32_t(W), uint32_t(H), layout, close);
+  return snapToPyramid(texels.data(), cov.data(), uint32_t(W), uint32_t(H), layout, close, &payload);
 }
 
 }  // namespace
@@ -475,7 +476,7 @@ size_t snapNormals(TileOutput& out, int width, int height, double maxDegrees) {
     decodeNormal(a, na);
     decodeNormal(b, nb);
     return na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2] >= minCos;
-  });
+  }, out.normalPyramid);
 }
 
 size_t snapColours(TileOutput& out, int width, int height, int maxLevels) {
@@ -483,7 +484,7 @@ size_t snapColours(TileOutput& out, int width, int height, int maxLevels) {
     for (int c = 0; c < 3; ++c)
       if (std::abs(int(a[c]) - int(b[c])) > maxLevels) return false;
     return true;
-  });
+  }, out.rgbaPyramid);
 }
 
 void rasterizeTile(const TileGrid& g, const double* tris, size_t triangleCount, double slack, double minCos,

@@ -29,6 +29,10 @@ struct TileOutput {
   std::vector<uint8_t> normals;   // width * height * kNormalBytes (encodeNormal, world) when normals were given
   std::vector<uint8_t> rgba;      // width * height * 4 when colours were given
   size_t covered = 0;
+  // The normals' and colours' pyramid payloads, made where snapNormals and snapColours snapped
+  // them (snapToPyramid), for the page coder (PackWriter::writeTile); empty otherwise. Stale once
+  // the texels change.
+  std::vector<uint8_t> normalPyramid, rgbaPyramid;
 };
 
 // Samples of one cell in its frame. normal (3 per sample, frame components, unit), rgb (3 per

@@ -161,6 +161,60 @@ TEST(TileCodec, SnappingStaysWithinItsToleranceAndShrinksTheTile) {
   }
 }
 
+// The payload snapToPyramid hands on is the one encodeTile makes from the snapped texels (the
+// pyramid blob compresses it: the blobs are the same bytes only if the payloads are), and it is
+// empty where the coverage it was given is not the texels' own.
+TEST(TileCodec, SnappedPayloadIsTheOneTheCoderMakes) {
+  std::mt19937 rng(23);
+  int made = 0, refused = 0;
+  for (TexelLayout L : {kNormalTexels, kColorTexels})
+    for (int trial = 0; trial < 90; ++trial) {
+      const uint32_t w = 1 + rng() % 40, h = 1 + rng() % 40;
+      const size_t tb = size_t(L.texelBytes());
+      std::vector<uint8_t> cov;
+      std::vector<uint8_t> t = makeTile(w, h, L, trial % 3 == 0 ? 0 : 2.0, trial % 4 == 0 ? 0.3 : 0.03, rng, cov);
+      // Every sixth tile: a covered texel of zero bytes, or an uncovered one with some.
+      const bool mismatch = trial % 6 == 5;
+      if (mismatch) {
+        const size_t k = rng() % cov.size();
+        if (cov[k]) std::memset(&t[k * tb], 0, tb);
+        else t[k * tb] = uint8_t(L.quantum);
+      }
+      const uint32_t tol = (trial % 2 ? 2 : 6) * L.quantum;
+      std::vector<uint8_t> payload{1, 2, 3};  // replaced
+      snapToPyramid(
+          t.data(), cov.data(), w, h, L,
+          [&](const uint8_t* a, const uint8_t* b) {
+            for (int c = 0; c < L.comps; ++c)
+              if (std::abs(int(valueAt(a + c * L.bytes, L.bytes)) - int(valueAt(b + c * L.bytes, L.bytes))) > int(tol))
+                return false;
+            return true;
+          },
+          &payload);
+      const bool hasPyramid = pyramidLevels(w, h) > 0;
+      if (mismatch || !hasPyramid) {
+        ASSERT_TRUE(payload.empty()) << "tile " << w << "x" << h << " trial " << trial;
+        refused += hasPyramid;
+        continue;
+      }
+      ASSERT_FALSE(payload.empty()) << "tile " << w << "x" << h << " trial " << trial;
+      ++made;
+      const std::vector<uint8_t> page = withGutter(t, w, h, tb, w + 2, 0, 0, h + 2);
+      const TileRegion r{0, 0, w + 2, h + 2};
+      for (TileForm form : {TileForm::kPyramid, TileForm::kSmaller})
+        ASSERT_EQ(encodeTile(page.data(), w + 2, r, L, kDefaultTileLevel, form, payload),
+                  encodeTile(page.data(), w + 2, r, L, kDefaultTileLevel, form))
+            << "layout " << L.comps << " tile " << w << "x" << h << " trial " << trial;
+      // The coder reads the payload it is given: a changed one codes differently.
+      payload.back() ^= 1;
+      ASSERT_NE(encodeTile(page.data(), w + 2, r, L, kDefaultTileLevel, TileForm::kPyramid, payload),
+                encodeTile(page.data(), w + 2, r, L, kDefaultTileLevel, TileForm::kPyramid));
+    }
+  std::printf("%d payloads made, %d refused for their coverage\n", made, refused);
+  EXPECT_GT(made, 60);
+  EXPECT_GT(refused, 5);
+}
+
 TEST(TileCodec, UpsampleAveragesCoveredEvenNeighboursOnTheQuantum) {
   // 3 x 3 normals: even texels at the corners and (2, 0)...; the centre averages four.
   const uint32_t w = 3, h = 3;
