@@ -107,7 +107,7 @@ void applyPlanes(const uint8_t* planes, uint8_t* page, uint32_t pageWidth, TileR
 // more bytes): they keep their own.
 constexpr int kTileMinMatch = 6, kTileMinMatchUpTo = 12;
 
-std::vector<uint8_t> compress(const std::vector<uint8_t>& bytes, int level, size_t skip = 0) {
+std::vector<uint8_t> compress(std::span<const uint8_t> bytes, int level, size_t skip = 0) {
   std::vector<uint8_t> out(skip + ZSTD_compressBound(bytes.size()));
   ZSTD_CCtx* c = threadZstd().c;
   ZSTD_CCtx_reset(c, ZSTD_reset_session_and_parameters);
@@ -298,7 +298,7 @@ std::vector<uint8_t> pyramidPayload(const uint8_t* page, uint32_t pageWidth, Til
 }
 
 // The pyramid blob: the tag, then the payload's zstd frame.
-std::vector<uint8_t> pyramidBlob(const std::vector<uint8_t>& payload, int level) {
+std::vector<uint8_t> pyramidBlob(std::span<const uint8_t> payload, int level) {
   std::vector<uint8_t> out = compress(payload, level, sizeof kPyramidTag);
   std::copy(std::begin(kPyramidTag), std::end(kPyramidTag), out.begin());
   return out;
@@ -308,7 +308,7 @@ std::vector<uint8_t> pyramidBlob(const std::vector<uint8_t>& payload, int level)
 // pack's level on all but 1.3 % of the normal and colour tiles of the real scans and the survey;
 // a pack's normal and colour bytes grew by at most 0.043 % (docs/BENCHMARKS.md). Coding both
 // forms at the pack's level took about 4 % more of a pack's CPU.
-size_t quickSize(const std::vector<uint8_t>& bytes) {
+size_t quickSize(std::span<const uint8_t> bytes) {
   thread_local std::vector<uint8_t> scratch;
   scratch.resize(ZSTD_compressBound(bytes.size()));
   return ZSTD_compressCCtx(threadZstd().c, scratch.data(), scratch.size(), bytes.data(), bytes.size(), 1);
@@ -481,8 +481,9 @@ std::vector<uint8_t> encodeTile(const uint8_t* page, uint32_t pageWidth, TileReg
   if (layout.comps == 1) return compress(residualPlanes(page, pageWidth, r, layout), level);
   // Normals and colours: the pyramid or LOCO-I, whichever codes smaller (both decode to the
   // same texels), judged by quickSize; snapped texels: the pyramid.
-  const std::vector<uint8_t> payload =
-      pyramid.empty() ? pyramidPayload(page, pageWidth, r, layout) : std::vector<uint8_t>(pyramid.begin(), pyramid.end());
+  std::vector<uint8_t> made;
+  if (pyramid.empty()) made = pyramidPayload(page, pageWidth, r, layout);
+  const std::span<const uint8_t> payload = pyramid.empty() ? std::span<const uint8_t>(made) : pyramid;
   if (!payload.empty() && form == TileForm::kPyramid) return pyramidBlob(payload, level);
   const std::vector<uint8_t> planes = residualPlanes(page, pageWidth, r, layout);
   if (!payload.empty() && quickSize(payload) < quickSize(planes)) return pyramidBlob(payload, level);
