@@ -702,8 +702,8 @@ Status distributePoints(const InputSet& input, const Quantizer& qz, const Distri
     SA_RETURN_IF_ERROR(input.stream(hist, false));
     plan = std::make_unique<ChunkPlan>(planChunks(std::move(hist.counts()), planLevel, level, opt));
   }
-  // In memory: one node (level 0), whose records passes A and B hold anyway.
-  const bool hold = opt.inMemory && !opt.keepTriangles && level == 0 && n <= opt.maxPointsPerChunk;
+  // In memory: one node (level 0: the input fits one chunk), whose records passes A and B hold anyway.
+  const bool hold = opt.inMemory && !opt.keepTriangles && n <= opt.maxPointsPerChunk;
   ChunkFiles files(opt.scratchDir, hold ? std::max<uint64_t>(n, 1) : 0);
   {
     DistributeSink sink(qz, opt, files, level, plan.get(), out, progress, n);
