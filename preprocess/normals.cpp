@@ -221,6 +221,8 @@ struct NeighbourLists {
 struct OrderedPoints {
   const double* src;  // positions, in the grid's order
   const uint32_t* orig;
+  const uint32_t* callerIndex;  // point i of the order was callerIndex[i] in the caller's order
+  size_t neighboursFrom;        // SurfaceOptions::neighboursFrom
   float* nrm;     // the caller's normals
   uint8_t* keep;  // the caller's flags
   size_t at(size_t i) const { return orig ? orig[i] : i; }  // no orig: the caller's arrays are in the grid's order
@@ -388,7 +390,7 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
       const double g = grid.blockReach(i);
       if (!(std::isinf(g) || dist[m - 1] < g * g)) place[i] = listed.add(i, in, m) ? kListed : kBeyond;
     }
-    if (!fit) return;
+    if (!fit || pts.callerIndex[i] >= pts.neighboursFrom) return;
     const LocalSurface ls = fitLocal(src, p, in, dist, m);
     float* out = pts.normal(i);
     const Eigen::Vector3d given(out[0], out[1], out[2]);
@@ -415,7 +417,12 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
   if (opt.progress && reported < 2 * n) opt.progress(2 * n - reported);
   if (outliers) markOutliers(grid, density, place, listed, k, opt.outlierRatio, pts);
   if (opt.estimateNormals) propagateOrientation(weak, n, pts);
-  return size_t(std::count(pts.keep, pts.keep + n, 0));
+  size_t removed = 0;
+  for (size_t i = 0; i < n; ++i) {
+    if (pts.callerIndex[i] < pts.neighboursFrom) removed += !pts.kept(i);
+    else pts.keep[pts.at(i)] = 0;
+  }
+  return removed;
 }
 
 // v's records of `width` values laid out in `order` (the record now at i was at order[i]), in
@@ -470,8 +477,8 @@ size_t fitSurface(double* pos, size_t n, const NormalOrientation& orient, const 
       laidOrient.scanStride = sizeof(uint16_t);
     }
   }
-  const size_t removed = fitOrdered(grid, {src.data(), laid ? nullptr : orig.data(), nrm, keep.data()}, n, k,
-                                    laid ? laidOrient : orient, opt, pos, localSpacing);
+  const size_t removed = fitOrdered(grid, {src.data(), laid ? nullptr : orig.data(), orig.data(), opt.neighboursFrom, nrm, keep.data()},
+                                    n, k, laid ? laidOrient : orient, opt, pos, localSpacing);
   if (order) *order = std::move(orig);
   return removed;
 }

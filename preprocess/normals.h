@@ -5,6 +5,7 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <functional>
 #include <vector>
 
@@ -40,6 +41,10 @@ struct SurfaceOptions {
   // (the point now at i was at (*order)[i], fitSurface's order must be given), and keep and
   // localSpacing come in that order. The caller permutes its other per-point arrays.
   bool layOut = false;
+  // Points from this index on (in the caller's order) are neighbours only: the fit and the
+  // outlier test read them, but they get no fit of their own and are flagged 0 in keep (a
+  // chunk's halo, preprocess/chunk_halo.h). They are not counted as outliers.
+  size_t neighboursFrom = SIZE_MAX;
   // Progress of long fits, called now and then from any thread with the units done since the
   // last call; the whole fit is 2 units a point. May be empty.
   std::function<void(size_t)> progress;

@@ -100,6 +100,10 @@ inline constexpr double kLocalTexelRefine = 4;
 // Bytes of working memory per point while a chunk is processed (records, positions,
 // normals, neighbour grid, tile samples); sets the chunk size from the memory budget.
 inline constexpr uint64_t kBytesPerPointInFlight = 240;
+// Of the points the budget lets a chunk hold in memory, the share left for its halo (the
+// neighbouring chunks' points near its faces, preprocess/chunk_halo.h): chunks take the rest,
+// and a halo larger than its share is cut there.
+inline constexpr uint64_t kHaloShareDiv = 5;  // a fifth
 // The heightmaps phase: bytes a chunk holds per point while its tiles are made (record,
 // position, normal, margin index), and a tile's working bytes at their peak per texel (the
 // pull-push pyramid with colour and normal channels, surface, coverage, output and coded
