@@ -82,19 +82,26 @@ Status writeHalo(HaloSet& h, const Quantizer& qz, const std::vector<ChunkInfo>& 
       // at least m wide that meets the ball of radius m around x holds one of them (on each axis
       // its side, m long or more, holds x - m, x or x + m). All 26, also across the faces the
       // point is not near: a smaller neighbour may end within the margin along them.
+      // Per axis the probe coordinates (x - m, x, x + m where inside the root cube) and whether
+      // each leaves the point's own cube; a probe that leaves it on no axis finds its own chunk.
+      uint32_t coord[3][3];
+      bool leaves[3][3];
+      int count[3];
+      for (int a = 0; a < 3; ++a) {
+        count[a] = 0;
+        for (int d = -1; d <= 1; ++d) {
+          const double p = x[a] + d * m;
+          if (!(p >= 0 && p < kSpan)) continue;
+          coord[a][count[a]] = uint32_t(p);
+          leaves[a][count[a]++] = d != 0 && !(p >= lo[a] && p < lo[a] + size);
+        }
+      }
       size_t nf = 0;
-      for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int d[3] = {dx, dy, dz};
-            bool use = dx || dy || dz;
-            uint32_t pq[3];
-            for (int a = 0; a < 3 && use; ++a) {
-              const double p = x[a] + d[a] * m;
-              if (!(p >= 0 && p < kSpan)) use = false;
-              else pq[a] = uint32_t(p);
-            }
-            if (!use) continue;
+      for (int k = 0; k < count[2]; ++k)
+        for (int j = 0; j < count[1]; ++j)
+          for (int i = 0; i < count[0]; ++i) {
+            if (!(leaves[0][i] || leaves[1][j] || leaves[2][k])) continue;
+            const uint32_t pq[3] = {coord[0][i], coord[1][j], coord[2][k]};
             const int64_t c = where.find(pq);
             if (c < 0 || uint32_t(c) == source || std::find(found.begin(), found.begin() + long(nf), uint32_t(c)) != found.begin() + long(nf))
               continue;
