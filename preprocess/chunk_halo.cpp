@@ -14,7 +14,7 @@
 namespace sa {
 namespace {
 
-constexpr int kMaxLevel = 20;  // node coordinates of 20 bits each in a locator key
+constexpr int kMaxLevel = 15;  // a locator key: the level in 4 bits, node coordinates in 20 each
 constexpr double kSpan = 4294967296.0;  // the root cube in quantized units
 
 uint64_t nodeKey(int level, uint64_t ix, uint64_t iy, uint64_t iz) {
