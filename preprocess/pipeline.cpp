@@ -512,34 +512,6 @@ void shareHalo(HaloSet& h) {
   if (Cluster::distributed()) mergeHaloSources(h, Cluster::allGather(haloSources(h)));
 }
 
-// Before pass A: every chunk this rank owns writes its points near the other chunks' cubes, as
-// distributed (pass A rewrites the chunk files). Point inputs of more than one chunk only.
-Status writeHalosA(PackJob& job) {
-  const std::vector<ChunkInfo>& chunks = job.dist.chunks;
-  if (job.triangles || chunks.size() < 2) return Status::ok();
-  const std::string dir = std::filesystem::path(chunks[0].path).parent_path().string();
-  job.haloA = HaloSet{dir, "a", {}};
-  job.haloB = HaloSet{dir, "b", {}};
-  job.haloA.from.resize(chunks.size());
-  job.haloB.from.resize(chunks.size());
-  job.ownSpacing.assign(chunks.size(), Spacing{});
-  const ChunkLocator where(chunks);
-  Status s;
-  for (uint32_t ci = 0; ci < chunks.size() && s; ++ci) {
-    if (job.owners[ci] != Cluster::rank()) continue;
-    ChunkRecords pts;
-    RawVector<double> pos;
-    s = loadChunk(chunks[ci], pts);
-    if (!s) break;
-    decodePositions(pts, job.qz, pos);
-    const Spacing sp = job.ownSpacing[ci] = chunkSpacing(pts, pos);  // kept for pass A
-    s = writeHalo(job.haloA, job.qz, chunks, where, ci, pts, kHaloSpacings * std::max(sp.area, sp.nearest));
-  }
-  SA_RETURN_IF_ERROR(Cluster::agree(s));
-  shareHalo(job.haloA);
-  return Status::ok();
-}
-
 // ---- pass A, one chunk: normals (+ smoothing, outliers), the octree, the chunk rewritten in cell order ----
 Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, uint64_t before, uint64_t total,
                   HaloSet& haloB, ChunkCells& out) {
@@ -668,6 +640,42 @@ void mergeRanksCells(PackJob& job, const std::vector<uint8_t>& mine) {
   for (uint32_t ci = 0; ci < byChunk.size(); ++ci) mergeChunkCells(job, ci, byChunk[ci]);
 }
 
+// Before pass A: every chunk this rank owns writes its points near the other chunks' cubes, as
+// distributed (pass A rewrites the chunk files). Point inputs of more than one chunk only.
+Status writeHalosA(PackJob& job) {
+  const std::vector<ChunkInfo>& chunks = job.dist.chunks;
+  if (job.triangles || chunks.size() < 2) return Status::ok();
+  const std::string dir = std::filesystem::path(chunks[0].path).parent_path().string();
+  job.haloA = HaloSet{dir, "a", {}};
+  job.haloB = HaloSet{dir, "b", {}};
+  job.haloA.from.resize(chunks.size());
+  job.haloB.from.resize(chunks.size());
+  job.ownSpacing.assign(chunks.size(), Spacing{});
+  const ChunkLocator where(chunks);
+  // Progress: the points of this rank's chunks read so far (an extra read of the chunk files).
+  const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
+  const ProgressFn progress = shareProgress(job.progress, mine, total);
+  uint64_t done = 0;
+  if (progress) progress("halos", 0, mine);
+  Status s;
+  for (uint32_t ci = 0; ci < chunks.size() && s; ++ci) {
+    if (job.owners[ci] != Cluster::rank()) continue;
+    if (progress) progress("halos", done, mine);
+    done += chunks[ci].count;
+    ChunkRecords pts;
+    RawVector<double> pos;
+    s = loadChunk(chunks[ci], pts);
+    if (!s) break;
+    decodePositions(pts, job.qz, pos);
+    const Spacing sp = job.ownSpacing[ci] = chunkSpacing(pts, pos);  // kept for pass A
+    s = writeHalo(job.haloA, job.qz, chunks, where, ci, pts, kHaloSpacings * std::max(sp.area, sp.nearest));
+  }
+  if (progress && s) progress("halos", mine, mine);
+  SA_RETURN_IF_ERROR(Cluster::agree(s));
+  shareHalo(job.haloA);
+  return Status::ok();
+}
+
 Status cellsPhase(PackJob& job) {
   const PhaseTimer timer;
   if (job.triangles) job.vertexCell.assign(job.dist.vertexPos.size() / 3, UINT32_MAX);
@@ -679,10 +687,10 @@ Status cellsPhase(PackJob& job) {
                                " MPI ranks: ranks without a chunk wait (a smaller --mem-budget makes more chunks)");
   const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
   const ProgressFn progress = shareProgress(job.progress, mine, total);
+  Status s = writeHalosA(job);
   if (progress) progress("octree", 0, mine);
   uint64_t processed = 0;
   ByteWriter shared;  // cluster pack: this rank's chunks' cells, for the others
-  Status s = writeHalosA(job);
   for (uint32_t ci = 0; ci < job.dist.chunks.size() && s; ++ci) {
     if (job.owners[ci] != Cluster::rank()) continue;
     const uint64_t count = job.dist.chunks[ci].count;  // before outliers are dropped

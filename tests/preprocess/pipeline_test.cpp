@@ -87,10 +87,23 @@ TEST(Pipeline, TinyMemoryBudgetGivesSameResultThroughManyChunks) {
   // The budget also bounds a cell's points (maxLeafPoints): the same bound for both.
   big.octree.maxLeafPoints = small.octree.maxLeafPoints = maxLeafPoints(small.memBudget);
   PackSummary a, b;
-  ASSERT_TRUE(packInput(*in, d.file("a.hfa"), big, nullptr, a).isOk());
-  ASSERT_TRUE(packInput(*in, d.file("b.hfa"), small, nullptr, b).isOk());
+  // The chunks' halos (preprocess/chunk_halo.h) are written in a phase of their own, with
+  // progress; a pack of one chunk has none.
+  std::map<int, std::vector<std::pair<uint64_t, uint64_t>>> halos;
+  int pack = 0;
+  const ProgressFn progress = [&](const char* phase, uint64_t done, uint64_t total) {
+    if (std::string(phase) == "halos") halos[pack].emplace_back(done, total);
+  };
+  ASSERT_TRUE(packInput(*in, d.file("a.hfa"), big, progress, a).isOk());
+  pack = 1;
+  ASSERT_TRUE(packInput(*in, d.file("b.hfa"), small, progress, b).isOk());
   EXPECT_EQ(a.chunks, 1u);
   EXPECT_GT(b.chunks, 2u);
+  EXPECT_TRUE(halos[0].empty());
+  ASSERT_GE(halos[1].size(), 3u);
+  EXPECT_EQ(halos[1].front().first, 0u);
+  EXPECT_EQ(halos[1].back().first, halos[1].back().second);
+  for (size_t i = 1; i < halos[1].size(); ++i) EXPECT_GE(halos[1][i].first, halos[1][i - 1].first);
   EXPECT_EQ(a.pointsRead, b.pointsRead);
   // Chunks are octree nodes, so the cells are the same whether or not the data was chunked
   // (the cell list order may differ).
