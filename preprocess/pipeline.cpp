@@ -17,6 +17,7 @@
 #include <memory>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <span>
 #include <unordered_map>
 
@@ -126,6 +127,7 @@ struct PackJob {
   // Point inputs of more than one chunk: each chunk's neighbours' points near its cube, as
   // distributed for pass A and as fitted for pass B (preprocess/chunk_halo.h).
   HaloSet haloA, haloB;
+  std::optional<ChunkLocator> chunkAt;  // which chunk holds a position (set with the halos)
   std::vector<Spacing> ownSpacing;  // per chunk this rank owns: its spacing, when writeHalosA had it
   uint64_t scratch0 = 0, raw0 = 0;  // chunk bytes this process had written before the pack
   double otherCpu = 0;              // cluster pack: the other ranks' CPU seconds
@@ -584,10 +586,8 @@ Status chunkCells(const PackJob& job, uint32_t ci, const ProgressFn& progress, u
   });
   out.count = n;
   addCells(job.triangles, ci, oc, idx, pos, sorted, out);
-  if (!haloB.from.empty()) {
-    const ChunkLocator where(job.dist.chunks);
-    SA_RETURN_IF_ERROR(writeHalo(haloB, job.qz, job.dist.chunks, where, ci, sorted, kHaloSpacings * out.areaSpacing));
-  }
+  if (!haloB.from.empty())
+    SA_RETURN_IF_ERROR(writeHalo(haloB, job.qz, job.dist.chunks, *job.chunkAt, ci, sorted, kHaloSpacings * out.areaSpacing));
   return saveChunk(ch, std::move(sorted));
 }
 
@@ -651,7 +651,7 @@ Status writeHalosA(PackJob& job) {
   job.haloA.from.resize(chunks.size());
   job.haloB.from.resize(chunks.size());
   job.ownSpacing.assign(chunks.size(), Spacing{});
-  const ChunkLocator where(chunks);
+  job.chunkAt.emplace(chunks);
   // Progress: the points of this rank's chunks read so far (an extra read of the chunk files).
   const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
   const ProgressFn progress = shareProgress(job.progress, mine, total);
@@ -668,7 +668,7 @@ Status writeHalosA(PackJob& job) {
     if (!s) break;
     decodePositions(pts, job.qz, pos);
     const Spacing sp = job.ownSpacing[ci] = chunkSpacing(pts, pos);  // kept for pass A
-    s = writeHalo(job.haloA, job.qz, chunks, where, ci, pts, kHaloSpacings * std::max(sp.area, sp.nearest));
+    s = writeHalo(job.haloA, job.qz, chunks, *job.chunkAt, ci, pts, kHaloSpacings * std::max(sp.area, sp.nearest));
   }
   if (progress && s) progress("halos", mine, mine);
   SA_RETURN_IF_ERROR(Cluster::agree(s));
