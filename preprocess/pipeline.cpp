@@ -642,7 +642,8 @@ void mergeRanksCells(PackJob& job, const std::vector<uint8_t>& mine) {
 
 // Before pass A: every chunk this rank owns writes its points near the other chunks' cubes, as
 // distributed (pass A rewrites the chunk files). Point inputs of more than one chunk only.
-Status writeHalosA(PackJob& job) {
+// `progress` and `mine` are the cells phase's (this rank's points).
+Status writeHalosA(PackJob& job, const ProgressFn& progress, uint64_t mine) {
   const std::vector<ChunkInfo>& chunks = job.dist.chunks;
   if (job.triangles || chunks.size() < 2) return Status::ok();
   const std::string dir = std::filesystem::path(chunks[0].path).parent_path().string();
@@ -653,8 +654,6 @@ Status writeHalosA(PackJob& job) {
   job.ownSpacing.assign(chunks.size(), Spacing{});
   job.chunkAt.emplace(chunks);
   // Progress: the points of this rank's chunks read so far (an extra read of the chunk files).
-  const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
-  const ProgressFn progress = shareProgress(job.progress, mine, total);
   uint64_t done = 0;
   if (progress) progress("halos", 0, mine);
   Status s;
@@ -687,7 +686,7 @@ Status cellsPhase(PackJob& job) {
                                " MPI ranks: ranks without a chunk wait (a smaller --mem-budget makes more chunks)");
   const uint64_t total = job.bounds.count + job.dist.surfaceSamples, mine = pointsOwned(job);
   const ProgressFn progress = shareProgress(job.progress, mine, total);
-  Status s = writeHalosA(job);
+  Status s = writeHalosA(job, progress, mine);
   if (progress) progress("octree", 0, mine);
   uint64_t processed = 0;
   ByteWriter shared;  // cluster pack: this rank's chunks' cells, for the others
