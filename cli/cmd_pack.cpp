@@ -55,6 +55,15 @@ const char* kHelp =
     "                         texel of it lies within R coverage radii of surface: the gaps a\n"
     "                         random scatter of points leaves, which look like pinholes from\n"
     "                         afar (default 2; 0 keeps every gap open, for small real holes)\n"
+    "  --sparse-reach R       point inputs: a point whose neighbours lie on a clean surface (not\n"
+    "                         loose returns such as foliage, not a scan's edge) lets its splat and\n"
+    "                         coverage follow its own spacing up to R times the pack's, so a surface\n"
+    "                         sampled much more sparsely than the rest (a terrestrial scan's far\n"
+    "                         field, a strip flown higher, water) is drawn as surface instead of\n"
+    "                         specks (default 1.5, the limit of every point, which leaves sparse\n"
+    "                         water returns open; 6 covers regions 16x sparser; at most 16).\n"
+    "                         The surface test is the smoothing fit's: not with --no-smooth on\n"
+    "                         files with normals\n"
     "  --splat R              point inputs: each point spreads over R sample spacings with a\n"
     "                         smooth kernel (default 1.5; 0 = bilinear onto the nearest texels)\n"
     "  --no-smooth            point inputs: keep the points where they are (default: moved onto\n"
@@ -209,6 +218,12 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
     if (*v <= 0 || *v > 100) return (Status::badInput("--coverage must be in (0, 100]"));
     opt.coverageRadius = *v;
   }
+  if (a.has("sparse-reach")) {
+    auto v = parseNumber("sparse-reach", a.get("sparse-reach"));
+    if (!v) return v.status();
+    if (*v < 1.5 || *v > 16) return (Status::badInput("--sparse-reach must be in [1.5, 16]"));
+    opt.sparseReach = *v;
+  }
   if (a.has("fill-gaps")) {
     auto v = parseNumber("fill-gaps", a.get("fill-gaps"));
     if (!v) return v.status();
@@ -332,7 +347,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
 int cmdPack(int argc, char** argv) {
   Args a;
   Status s = a.parse(argc, argv,
-                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage", "fill-gaps",
+                     {"output", "mem-budget", "texels", "texel-size", "max-depth", "max-angle", "coverage", "sparse-reach", "fill-gaps",
                       "neighbours", "scratch", "outliers", "min-split", "columns", "splat", "outlier-ratio", "up", "modes", "grooves",
                       "height-step", "normal-tolerance", "colour-tolerance", "zstd-level"},
                      {"as-points", "strict", "force", "no-smooth", "reproducible", "raw-pages", "no-levels", "lossless", "json", "quiet", "help"},

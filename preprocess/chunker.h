@@ -58,6 +58,9 @@ enum ChunkFlags : uint8_t {
   // A point sampled on a large triangle (triangle path), not an input vertex: vid is the
   // triangle's index. Large triangles get cells where none of their vertices lies.
   kChunkSurfaceSample = 2,
+  // Pass A's fit found a clean surface around the point (SurfaceOptions::surfaceLike): its splat
+  // and coverage radii may follow its spacing past the pack's (pipeline.cpp, sampleScale).
+  kChunkSurfaceLike = 4,
 };
 
 // Maps positions relative to the pack origin to 32-bit integers over the root cube.

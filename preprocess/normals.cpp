@@ -398,6 +398,7 @@ size_t fitOrdered(const GridKnn& grid, const OrderedPoints& pts, size_t n, int k
       if (opt.estimateNormals) out[0] = out[1] = out[2] = 0.f;  // unknown
       return;
     }
+    if (opt.surfaceLike && !ls.edge && ls.residual < kSurfaceResidual * ls.radius) opt.surfaceLike[o] = 1;
     // Smooth only where the neighbourhood is a surface and the move is small against it
     // (layers, vegetation and sharp features keep their points where they are).
     const double move = (ls.projected - p).norm();

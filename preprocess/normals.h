@@ -47,7 +47,17 @@ struct SurfaceOptions {
   // Progress of long fits, called now and then from any thread with the units done since the
   // last call; the whole fit is 2 units a point. May be empty.
   std::function<void(size_t)> progress;
+  // Per point (in localSpacing's order; may be null): set to 1 where the fit found a clean
+  // surface around the point (neighbours within kSurfaceResidual of their radius from the
+  // quadric, the point not at the neighbourhood's edge), else left as the caller set it. Such a
+  // point's radii may follow its spacing far past the pack's (a sparsely sampled surface:
+  // water, a scan's far field); loose returns (vegetation) and edges keep theirs near it.
+  uint8_t* surfaceLike = nullptr;
 };
+
+// The surface test of SurfaceOptions::surfaceLike: the neighbours' weighted RMS distance to the
+// point's quadric against the distance to its farthest neighbour.
+constexpr double kSurfaceResidual = 0.05;
 
 // The surface through a chunk's points, from one k-nearest-neighbour query per point (GridKnn):
 // outliers (flagged 0 in keep), unit normals (PCA of the neighbourhood refined by the MLS

@@ -62,12 +62,21 @@ struct PhaseTimer {
 
 Eigen::Vector3d vec(const double* d) { return Eigen::Vector3d(d[0], d[1], d[2]); }
 
+// The most a point sample's radii grow with its local spacing, over the pack's (sampleScale).
+// Past twice that, random samples' coverage disks (1.5 x 1.5 pack spacings) cover under about
+// four fifths of their surface: it shows as specks.
+constexpr float kMaxScale = 1.5f, kSpeckleScale = 2 * kMaxScale;
+
 struct WorkCell {
   CellRecord rec{};
   uint32_t chunk = 0, first = 0, count = 0;  // range of the chunk's points (cell order), surface samples included
   double ext[6] = {0, 0, 0, 0, 0, 0};        // point extents in the frame: uMin uMax vMin vMax wMin wMax
   bool sampled = false;                      // holds points sampled on large triangles
   float spacing = 0;  // point inputs: the median area spacing of its points (0: unknown, use the pack's)
+  // Point inputs: the largest area spacing of its surface-like points (kChunkSurfaceLike), which
+  // sets how far its tile and margin reach (cellReach).
+  float surfaceSpacing = 0;
+  uint32_t sparseSurface = 0;  // its surface-like points whose spacing is over kSpeckleScale of its chunk's
 };
 
 // Progress from inside one chunk's parallel loops: threads add the points they finished; the
@@ -323,13 +332,18 @@ std::vector<uint32_t> fitChunkSurface(const PackJob& job, ChunkRecords& pts, Raw
   so.progress = [&](size_t n) { ticker.add(n); };
   std::vector<uint8_t> keep;
   RawVector<float> local(pts.size());  // every entry written by the fit
+  std::vector<uint8_t> surface(pts.size(), 0);
   std::vector<uint32_t> order;
   so.layOut = true;
   so.neighboursFrom = own;
+  so.surfaceLike = surface.data();
   removed = fitSurface(pos.data(), pts.size(), orient, so, nrm.data(), keep, local.data(), &order);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& b) {
-    for (size_t i = b.begin(); i != b.end(); ++i)
-      pts[order[i]].spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
+    for (size_t i = b.begin(); i != b.end(); ++i) {
+      ChunkPoint& p = pts[order[i]];
+      p.spacing = chunkSpacing > 0 ? uint16_t(std::clamp(std::lround(local[i] / chunkSpacing * 1024), 0L, 65535L)) : 0;
+      p.flags = uint8_t((p.flags & ~kChunkSurfaceLike) | (surface[i] ? kChunkSurfaceLike : 0));
+    }
   });
   return layOutKept(pts, pos, nrm, keep, order);
 }
@@ -429,6 +443,10 @@ WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>&
     }
     if (sorted[k].flags & kChunkSurfaceSample) wc.sampled = true;
     else ++real;
+    if (sorted[k].flags & kChunkSurfaceLike) {
+      wc.surfaceSpacing = std::max(wc.surfaceSpacing, float(sorted[k].spacing * chunkSpacing / 1024));
+      wc.sparseSurface += sorted[k].spacing > kSpeckleScale * 1024;
+    }
   }
   wc.rec.pointCount = real;
   wc.spacing = medianSpacing(sorted, c.first, c.count, chunkSpacing);
@@ -719,11 +737,31 @@ Status cellsPhase(PackJob& job) {
 }
 
 // ---- texel size, tiles, atlas layout ----
+// A point sample's splat and coverage radii are the options' (in the pack's spacings) times its
+// local spacing over the pack's, at least 1 and at most kMaxScale: enough that a region seen by
+// one scan of several (twice the merged spacing) is not peppered with holes, while sparse loose
+// returns (vegetation), water and a scan's edges do not grow blobs of surface where no point is.
+// With --sparse-reach R a surface-like sample (kChunkSurfaceLike: its neighbours lie on a
+// smooth surface) follows its spacing up to R, so that a surface sampled more sparsely than the
+// pack (a terrestrial scan's far field, a strip flown higher) is covered as dense ones are.
+float sampleScale(const PackOptions& opt, const ChunkPoint& p, double toPack) {
+  const float s = float(p.spacing * toPack);
+  return std::clamp(s, 1.f, (p.flags & kChunkSurfaceLike) ? std::max(kMaxScale, float(opt.sparseReach)) : kMaxScale);
+}
+
+// How far a point cell's tile and margin reach past its points, over the coverage radius: a
+// sample at kMaxScale or less reaches past the tile's edge into the neighbours' margins as it
+// always did; a cell of sparser surface-like samples reaches as far as its widest one's radius.
+double cellReach(const PackJob& job, const WorkCell& c) {
+  const double s = std::min(c.surfaceSpacing / job.sum.spacing, job.opt.sparseReach);
+  return std::max(1.0, s / kMaxScale);
+}
+
 // How far a cell's tile reaches past its points' extents at texel t. Point tiles: the coverage
 // radius. Triangle tiles hold their triangles whole (assignPhase grew the extents) plus a texel,
 // and cells holding points sampled on large triangles reach the lattice step past those points.
 double tilePad(const PackJob& job, const WorkCell& c, double t) {
-  if (!job.triangles) return job.opt.coverageRadius * job.sum.spacing;
+  if (!job.triangles) return job.opt.coverageRadius * job.sum.spacing * cellReach(job, c);
   return std::max(t, c.sampled ? job.dist.surfaceSampleStep : 0.0);
 }
 
@@ -819,9 +857,28 @@ std::vector<TileSize> chooseTexels(PackJob& job) {
   return sizes;
 }
 
+// Says when surfaces sampled much more sparsely than the pack are drawn as speckle, and how to
+// draw them as surface (--sparse-reach), when they hold more than 1 % of the points.
+void warnSparseSurfaces(PackJob& job) {
+  if (job.triangles || job.opt.sparseReach > kMaxScale) return;
+  uint64_t sparse = 0, points = 0;
+  for (const WorkCell& c : job.cells) {
+    sparse += c.sparseSurface;
+    points += c.rec.pointCount;
+  }
+  if (!points || sparse * 100 <= points) return;
+  char warn[320];
+  std::snprintf(warn, sizeof warn,
+                "%.1f %% of the points lie on surfaces sampled over %.0f sample spacings apart (a scan's far field, "
+                "water, a strip flown higher): they show as scattered specks; --sparse-reach 6 draws them as surface",
+                100.0 * double(sparse) / double(points), double(kSpeckleScale));
+  job.sum.warnings.push_back(warn);
+}
+
 void layoutPhase(PackJob& job) {
   PackSummary& sum = job.sum;
   const PackOptions& opt = job.opt;
+  warnSparseSurfaces(job);
   const std::vector<TileSize> sizes = chooseTexels(job);
   const PackingResult layout = packAtlas(sizes, opt.maxPageSize);
   job.records.resize(job.cells.size());
@@ -1062,7 +1119,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, std::span<c
   for (uint32_t k = 0; k < c.count; ++k) idx[k] = c.first + k;
   MarginFinder::Cell mc{O, U, V, Wn, {}, c.first, c.count};
   std::copy(c.ext, c.ext + 6, mc.ext);
-  margins.find(mc, cover, std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), idx);
+  margins.find(mc, cover * cellReach(job, c), std::cos(job.opt.octree.maxAngleDeg * M_PI / 180), idx);
   const size_t n = idx.size();
   std::vector<double> u(n), v(n), w(n);
   std::vector<float> nf(3 * n);
@@ -1083,7 +1140,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, std::span<c
     nf[3 * k + 1] = float(nn.dot(V));
     nf[3 * k + 2] = float(nn.dot(Wn));
     if (withColor) std::copy(pts[pi].rgb, pts[pi].rgb + 3, &rgb[3 * k]);
-    scale[k] = float(pts[pi].spacing * toPack);
+    scale[k] = sampleScale(job.opt, pts[pi], toPack);
   }
   g.wMin = wLo;
   g.wMax = wHi;
@@ -1098,7 +1155,7 @@ void pointTile(const PackJob& job, const WorkCell& c, CellRecord& r, std::span<c
   SplatOptions so;
   so.splatRadius = job.opt.splatRadius * job.sum.spacing;
   so.coverageRadius = cover;
-  so.gapReach = job.opt.gapReach * cover;
+  so.gapReach = job.opt.gapReach * cover * cellReach(job, c);
   // The margin's samples and the surface between them may lie a little above or below the
   // cell's own points: the height range grows to hold them.
   so.fitHeightRange = true;
@@ -1346,6 +1403,10 @@ static Result<uint64_t> hashSetup(const InputSet& input, const PackOptions& o) {
       o.normalNeighbours, o.maxPageSize, int(o.compressPages), o.heightStep, o.normalTolerance, o.colourTolerance, o.pageLevel,
       int(o.storeLevels), o.gapReach);
   XXH3_64bits_update(st, opts, size_t(n));
+  if (o.sparseReach != PackOptions{}.sparseReach) {  // newer options: hashed only when given, so older packs stay current
+    const int m = std::snprintf(opts, sizeof(opts), " sparse-reach %.17g", o.sparseReach);
+    XXH3_64bits_update(st, opts, size_t(m));
+  }
   for (const Eigen::Vector3d& t : input.towardScanner()) XXH3_64bits_update(st, t.data(), 3 * sizeof(double));
   std::vector<char> buf(1 << 20);
   for (const InputFile& f : input.files()) {

@@ -32,6 +32,10 @@ struct PackOptions {
   double texelSize = 0;           // world units, every cell; 0 = per cell from its points' spacing
   double texelPerSpacing = 0.5;   // texel size as a fraction of the sample spacing
   double coverageRadius = 1.5;    // in sample spacings: texels whose surface point is farther stay empty
+  // Point inputs: how far (in the pack's sample spacings, over kMaxScale = 1.5) a surface-like
+  // sample's splat and coverage radii may follow its own spacing (--sparse-reach; 1.5: as far as
+  // every other sample's, which leaves surfaces sampled much more sparsely than the pack as speckle).
+  double sparseReach = 1.5;
   double gapReach = 2;            // in coverage radii: gaps inside a tile whose every texel is this near surface close
   double splatRadius = 1.5;       // in sample spacings: the point splat kernel (tangent planes)
   double outlierRatio = 3;        // local outlier test of point inputs (0: keep every point)

@@ -11,11 +11,6 @@
 namespace sa {
 namespace {
 
-// A sample's radii grow with its local spacing up to this factor: enough that a region seen by
-// one scan of several (twice the merged spacing) is not peppered with holes, while sparse
-// returns (vegetation, water) do not grow blobs of surface where no point is.
-constexpr float kMaxScale = 1.5f;
-
 struct Level {
   int w = 0, h = 0;
   std::vector<float> weight;   // clamped to [0, 1] after normalizing
@@ -96,7 +91,7 @@ std::vector<uint8_t> coverage3d(const TileGrid& g, const TileSamples& s, const s
   const int W = g.width, H = g.height;
   std::vector<uint8_t> covered(size_t(W) * H, 0);
   for (size_t i = 0; i < s.n; ++i) {
-    const double r = radius * (s.scale ? std::clamp(s.scale[i], 1.0f, kMaxScale) : 1.0f);
+    const double r = radius * (s.scale ? std::max(s.scale[i], 1.0f) : 1.0f);
     const double ru = r / g.du, rv = r / g.dv, r2 = r * r;
     const int riv = static_cast<int>(std::ceil(rv));
     const double fx = (s.u[i] - g.u0) / g.du - 0.5, fy = (s.v[i] - g.v0) / g.dv - 0.5;
@@ -253,7 +248,7 @@ void splat(const TileGrid& g, const TileSamples& s, const std::vector<double>& t
         gv = -n[1] / n[2];
       }
     }
-    const double r = radius * (s.scale ? std::clamp(s.scale[i], 1.0f, kMaxScale) : 1.0f);
+    const double r = radius * (s.scale ? std::max(s.scale[i], 1.0f) : 1.0f);
     const bool kernel = r >= std::max(g.du, g.dv);
     const double rx = r / g.du, ry = r / g.dv;
     const double fx = (s.u[i] - g.u0) / g.du - 0.5, fy = (s.v[i] - g.v0) / g.dv - 0.5;

@@ -43,8 +43,9 @@ struct TileSamples {
   const double* w = nullptr;
   const float* normal = nullptr;
   const uint8_t* rgb = nullptr;
-  // The sample's local spacing over the pack's: its splat and coverage radii are the options'
-  // times this (at least 1), so a region seen by one scan of several is not peppered with holes.
+  // The sample's local spacing over the pack's, as far as the caller lets it grow (pipeline.cpp,
+  // sampleScale): its splat and coverage radii are the options' times this (at least 1), so a
+  // region seen by one scan of several, or sampled sparsely, is not peppered with holes.
   const float* scale = nullptr;
   size_t n = 0;
 };

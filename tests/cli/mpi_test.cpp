@@ -88,6 +88,9 @@ void expectSameOverRanks(const std::string& args, const test::TempDir& d) {
 TEST(Mpi, LasSurveyWithoutNormalsIsTheSamePackOnTwoAndFourRanks) {
   test::TempDir d;
   expectSameOverRanks(test::sharedData("lidar/lone-star.las") + " --mem-budget 16M", d);
+  // Cells whose surface-like samples reach past the pack's spacing: their reach travels with
+  // the cells between ranks.
+  expectSameOverRanks(test::sharedData("lidar/lone-star.las") + " --mem-budget 16M --sparse-reach 6", d);
 }
 
 TEST(Mpi, RangeScansAndAMeshAreTheSamePackOnTwoAndFourRanks) {
