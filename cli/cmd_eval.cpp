@@ -49,7 +49,9 @@ const char* kHelp =
     "  surface pixel, the 3-D distance from its hit point to the nearest input point (a kd-tree\n"
     "  over the pack's source files), in units of the pack's sample spacing: median, p99 and the\n"
     "  fractions of pixels beyond 3 and beyond 10 spacings. Surface drawn where no point is\n"
-    "  (walls along scan edges, interpolation across height jumps) shows up here.\n"
+    "  (walls along scan edges, interpolation across height jumps) shows up here. '>3 loc':\n"
+    "  beyond 3 of the nearest point's own area spacing where that is wider than the pack's (a\n"
+    "  region sampled more sparsely than the rest, drawn as surface by pack --sparse-reach).\n"
     "\n"
     "options:\n"
     "  --reference FILE       the ground truth (a mesh or a .conf scan set)\n"
@@ -254,11 +256,12 @@ Status startImages(const Options& o, const Reference* ref) {
 }
 
 Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options& o, const Reference* ref,
-                      const NearestSamples* samples, const RenderSettings& rs, Row& row) {
+                      const NearestSamples* samples, const std::vector<float>& localScale, const RenderSettings& rs,
+                      Row& row) {
   std::vector<double> ms;
   SA_RETURN_IF_ERROR(timeViews(renderer, o, rs, ms));
   const Eigen::Vector3d origin(pack.meta().origin);
-  std::vector<double> depthAll, normalAll, farAll;
+  std::vector<double> depthAll, normalAll, farAll, localAll;
   double psnrSum = 0, iouSum = 0, silSum = 0;
   std::optional<SeamStats> seamAll;
   for (size_t v = 0; v < o.cams.size(); ++v) {
@@ -296,11 +299,15 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
     }
     if (samples) {
       const std::vector<double> hits = surfacePoints(o.cams[v], fr.depth, origin);
-      std::vector<double> d(hits.size() / 3);
-      samples->distances(hits.data(), d.size(), d.data());
+      std::vector<double> d(hits.size() / 3), local(d.size(), 1.0);
+      std::vector<uint32_t> nearest(d.size());
+      samples->distances(hits.data(), d.size(), d.data(), nearest.data());
       for (double& x : d) x /= pack.meta().sampleSpacing;
-      vr.far = summarizeFar(d);
+      for (size_t i = 0; i < d.size(); ++i)
+        if (nearest[i] < localScale.size()) local[i] = localScale[nearest[i]];
+      vr.far = summarizeFar(d, &local);
       farAll.insert(farAll.end(), d.begin(), d.end());
+      localAll.insert(localAll.end(), local.begin(), local.end());
     }
     row.views.push_back(std::move(vr));
   }
@@ -315,7 +322,7 @@ Status evaluateConfig(Renderer& renderer, const PackReader& pack, const Options&
     row.depthP95 = percentile(depthAll, 0.95);
     row.normalMed = normalAll.empty() ? -1 : percentile(normalAll, 0.5);
   }
-  if (samples) row.far = summarizeFar(farAll);
+  if (samples) row.far = summarizeFar(farAll, &localAll);
   if (seamAll) {
     seamAll->borderMeanDeg /= double(std::max<size_t>(1, seamAll->borderPairs));
     seamAll->insideMeanDeg /= double(std::max<size_t>(1, seamAll->insidePairs));
@@ -341,7 +348,8 @@ void printFigures(const char* label, double ms, const Row* sum, const ViewResult
   else std::fprintf(stderr, " %6s", "-");
   const std::optional<FarStats>& far = sum ? sum->far : view->far;
   if (far)
-    std::fprintf(stderr, " %8.3f %8.3f %9.4f %9.4f", far->median, far->p99, 100 * far->beyond3, 100 * far->beyond10);
+    std::fprintf(stderr, " %8.3f %8.3f %9.4f %9.4f %9.4f", far->median, far->p99, 100 * far->beyond3, 100 * far->beyond10,
+                 100 * far->beyond3Local);
   std::fprintf(stderr, "\n");
 }
 
@@ -351,7 +359,7 @@ void printHeader(const char* first, bool ref, bool far) {
     std::fprintf(stderr, " %8s %8s %7s %11s %11s %9s %7s %7s", "IoU", "IoU min", "silh.", "depth med%", "depth p95%",
                  "normal°", "PSNR dB", "holes");
   std::fprintf(stderr, " %6s", "seam");
-  if (far) std::fprintf(stderr, " %8s %8s %9s %9s", "far med", "far p99", ">3 sp %", ">10 sp %");
+  if (far) std::fprintf(stderr, " %8s %8s %9s %9s %9s", "far med", "far p99", ">3 sp %", ">10 sp %", ">3 loc %");
   std::fprintf(stderr, "\n");
 }
 
@@ -372,7 +380,9 @@ void printTables(const std::vector<Row>& rows) {
   for (const Row& r : rows) printFigures(configLabel(r).c_str(), r.frameMs, &r, nullptr);
   std::fprintf(stderr, "seam: mean angle between shading normals of neighbouring pixels from different cells over the same "
                        "within a cell (1 = no seams)\n");
-  if (far) std::fprintf(stderr, "far: distance from each rendered surface pixel to the nearest input point, in sample spacings\n");
+  if (far)
+    std::fprintf(stderr, "far: distance from each rendered surface pixel to the nearest input point, in sample spacings "
+                         "(loc: in that point's own spacing where it is wider)\n");
 }
 
 std::string seamJson(const std::optional<SeamStats>& s) {
@@ -386,8 +396,10 @@ std::string seamJson(const std::optional<SeamStats>& s) {
 std::string farJson(const std::optional<FarStats>& f) {
   if (!f) return "null";
   char buf[256];
-  std::snprintf(buf, sizeof(buf), "{\"pixels\": %zu, \"median\": %.6g, \"p99\": %.6g, \"beyond3\": %.6g, \"beyond10\": %.6g}",
-                f->pixels, f->median, f->p99, f->beyond3, f->beyond10);
+  std::snprintf(buf, sizeof(buf),
+                "{\"pixels\": %zu, \"median\": %.6g, \"p99\": %.6g, \"beyond3\": %.6g, \"beyond10\": %.6g, "
+                "\"beyond3_local\": %.6g}",
+                f->pixels, f->median, f->p99, f->beyond3, f->beyond10, f->beyond3Local);
   return buf;
 }
 
@@ -433,11 +445,11 @@ void printJson(const std::vector<Row>& rows, const PackReader& pack, const Refer
 std::string csvText(const std::vector<Row>& rows, const PackReader& pack) {
   std::ostringstream csv;
   csv << "pack,mode,iterations,skips,view,frame_ms,iou,silhouette_error,depth_median,depth_p95,normal_median_deg,psnr,"
-         "interior_holes,far_median,far_p99,far_beyond3,far_beyond10\n";
+         "interior_holes,far_median,far_p99,far_beyond3,far_beyond10,far_beyond3_local\n";
   auto farCols = [&](const std::optional<FarStats>& f) {
-    if (!f) return std::string(",,,");
+    if (!f) return std::string(",,,,");
     std::ostringstream s;
-    s << f->median << "," << f->p99 << "," << f->beyond3 << "," << f->beyond10;
+    s << f->median << "," << f->p99 << "," << f->beyond3 << "," << f->beyond10 << "," << f->beyond3Local;
     return s.str();
   };
   for (const Row& r : rows) {
@@ -514,7 +526,12 @@ int runEval(const Args& a) {
     s = renderer.setPoints(src.xyz, src.rgba, pack.meta().sampleSpacing);
     if (!s) return reportError(s);
   }
-  if (o.far) samples = std::make_unique<NearestSamples>(std::move(src.xyz));
+  std::vector<float> localScale;  // per source point: its area spacing over the pack's, at least 1
+  if (o.far) {
+    samples = std::make_unique<NearestSamples>(std::move(src.xyz));
+    localScale = samples->areaSpacings();
+    for (float& x : localScale) x = std::max(1.f, float(x / pack.meta().sampleSpacing));
+  }
   std::vector<Row> rows;
   if (!o.quiet)
     for (RenderMode mode : o.modes) warnIfModeFallsBack(renderer, pack, mode);
@@ -533,7 +550,7 @@ int runEval(const Args& a) {
       if (gdmParallax) row.mode += "+parallax";
       row.iterations = it;
       row.skips = mode == RenderMode::kPoints ? "-" : "all";
-      s = evaluateConfig(renderer, pack, o, ref.get(), samples.get(), rs, row);
+      s = evaluateConfig(renderer, pack, o, ref.get(), samples.get(), localScale, rs, row);
       if (!s) return reportError(s);
       rows.push_back(std::move(row));
     }

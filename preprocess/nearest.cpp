@@ -21,9 +21,10 @@ NearestSamples::NearestSamples(std::vector<float> xyz) : xyz_(std::move(xyz)) {
 
 NearestSamples::~NearestSamples() = default;
 
-void NearestSamples::distances(const double* queries, size_t m, double* out) const {
+void NearestSamples::distances(const double* queries, size_t m, double* out, uint32_t* nearest) const {
   if (!index_) {
     std::fill(out, out + m, std::numeric_limits<double>::infinity());
+    if (nearest) std::fill(nearest, nearest + m, UINT32_MAX);
     return;
   }
   tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
@@ -38,6 +39,7 @@ void NearestSamples::distances(const double* queries, size_t m, double* out) con
     index_->tree.knnSearch(mq, mi, md, 1, flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
     for (size_t i = 0; i < n; ++i) {
       const size_t k = r.begin() + i;
+      if (nearest) nearest[k] = ind[i] < 0 ? UINT32_MAX : uint32_t(ind[i]);
       if (ind[i] < 0) {
         out[k] = std::numeric_limits<double>::infinity();
         continue;
@@ -50,7 +52,26 @@ void NearestSamples::distances(const double* queries, size_t m, double* out) con
   });
 }
 
-FarStats summarizeFar(const std::vector<double>& d) {
+std::vector<float> NearestSamples::areaSpacings() const {
+  constexpr int kNeighbours = 8;
+  const size_t n = size();
+  std::vector<float> out(n, 0.f);
+  if (!index_ || n <= size_t(kNeighbours)) return out;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    const size_t m = r.size();
+    std::vector<int> ind(m * (kNeighbours + 1));
+    std::vector<float> dist(m * (kNeighbours + 1));
+    flann::Matrix<int> mi(ind.data(), m, kNeighbours + 1);
+    flann::Matrix<float> md(dist.data(), m, kNeighbours + 1);
+    flann::Matrix<float> mq(const_cast<float*>(&xyz_[3 * r.begin()]), m, 3);
+    index_->tree.knnSearch(mq, mi, md, kNeighbours + 1, flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED));
+    for (size_t i = 0; i < m; ++i)  // [0] is the sample itself (or a duplicate of it)
+      out[r.begin() + i] = float(std::sqrt(double(dist[i * (kNeighbours + 1) + kNeighbours]) * M_PI / kNeighbours));
+  });
+  return out;
+}
+
+FarStats summarizeFar(const std::vector<double>& d, const std::vector<double>* local) {
   FarStats s;
   s.pixels = d.size();
   if (d.empty()) return s;
@@ -69,6 +90,11 @@ FarStats summarizeFar(const std::vector<double>& d) {
   }
   s.beyond3 = double(b3) / double(d.size());
   s.beyond10 = double(b10) / double(d.size());
+  if (local && local->size() == d.size()) {
+    size_t b = 0;
+    for (size_t i = 0; i < d.size(); ++i) b += d[i] > 3 * (*local)[i];
+    s.beyond3Local = double(b) / double(d.size());
+  }
   return s;
 }
 

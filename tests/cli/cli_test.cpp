@@ -231,6 +231,9 @@ TEST(Cli, PackInfoBenchEvalJson) {
     EXPECT_NEAR(c["depth_median"].get<double>(), par["depth_median"].get<double>(), 1e-9) << ref;
     EXPECT_FALSE(c["far"].is_null());
     EXPECT_LE(c["far"]["beyond3"].get<double>(), 0.001) << ref;
+    // In local spacings (never narrower than the pack's) no pixel is farther than in the pack's.
+    EXPECT_GE(c["far"]["beyond3_local"].get<double>(), 0.0) << ref;
+    EXPECT_LE(c["far"]["beyond3_local"].get<double>(), c["far"]["beyond3"].get<double>()) << ref;
   }
   // --images: the files hold what was measured. Pixels only the render covers (finite in its depth,
   // infinite in the reference's) are the JSON's only_render; normal errors exist where both cover.

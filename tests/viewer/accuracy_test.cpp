@@ -303,6 +303,36 @@ TEST(Accuracy, OpenSheetSeenFromTheSideHasNoSkirt) {
   EXPECT_LE(double(off), 0.002 * double(drawn));
 }
 
+FarStats farOverOrbit(const PackReader& pack, int views, int size);
+
+// The sparse sheet's pack against its mesh (compareWithMesh), and every drawn pixel on the
+// sheet, within a fringe of 1.5 local spacings past its border (the coverage radius: 0.01 on
+// the dense half, 0.04 on the sparse one): wider radii grow no blobs off it. Its own GL context.
+template <class Height>
+MeshViews sheetViews(const PackReader& pack, const TriangleMesh& mesh, const std::vector<Camera>& cams, double diag,
+                     Height height, const char* name) {
+  EglContext ctx;
+  EXPECT_TRUE(ctx.init().isOk());
+  Renderer r;
+  EXPECT_TRUE(r.init(pack).isOk());
+  const MeshViews m = compareWithMesh(r, mesh, cams, diag, name);
+  size_t drawn = 0, off = 0, past = 0;
+  for (const Camera& c : cams) {
+    FrameResult fr;
+    EXPECT_TRUE(r.render(c, RenderSettings{}, fr, kReadDepth).isOk());
+    const std::vector<double> p = surfacePoints(c, fr.depth, Eigen::Vector3d::Zero());
+    for (size_t i = 0; i < p.size(); i += 3, ++drawn) {
+      const double x = std::clamp(p[i], -1.0, 1.0), y = std::clamp(p[i + 1], -1.0, 1.0);
+      off += std::abs(p[i + 2] - height(x, y)) > 0.005;
+      past += std::max(std::abs(p[i] - x), std::abs(p[i + 1] - y)) > (p[i] < 0 ? 0.01 : 0.04);
+    }
+  }
+  std::printf("%s: of %zu drawn pixels %zu off the sheet, %zu past its fringe\n", name, drawn, off, past);
+  EXPECT_LE(double(off), 0.002 * double(drawn));
+  EXPECT_LE(double(past), 0.002 * double(drawn));
+  return m;
+}
+
 // A sheet whose right half is sampled 16x more sparsely than its left (a terrestrial scan's far
 // field, a second strip flown higher): by default the sparse half's samples keep radii near
 // the pack's spacing and it renders as specks, and the pack says so; with --sparse-reach 6 its
@@ -342,8 +372,6 @@ TEST(Accuracy, SparseHalfOfASheetIsSurfaceWithSparseReach) {
   ASSERT_TRUE(mesh.isOk()) << mesh.status().message();
   auto input = InputSet::open({dir.file("sheet.ply")});
   ASSERT_TRUE(input.isOk()) << input.status().message();
-  EglContext ctx;
-  ASSERT_TRUE(ctx.init().isOk());
   const Eigen::Vector3d lo(-1, -1, -0.05), hi(1, 1, 0.05);
   const std::vector<Camera> cams = orbitCameras(lo, hi, 4, Eigen::Vector3d::UnitZ(), 40, 512, 512);
   MeshViews views[2];
@@ -360,27 +388,13 @@ TEST(Accuracy, SparseHalfOfASheetIsSurfaceWithSparseReach) {
     EXPECT_EQ(warned, k == 0);
     PackReader pack;
     ASSERT_TRUE(pack.open(path).isOk());
-    Renderer r;
-    ASSERT_TRUE(r.init(pack).isOk());
-    views[k] = compareWithMesh(r, *mesh, cams, (hi - lo).norm(), k ? "sparse sheet, --sparse-reach 6" : "sparse sheet");
-    // Every drawn pixel lies on the sheet, within a fringe of 1.5 local spacings past its border
-    // (the coverage radius: 0.01 on the dense half, 0.04 on the sparse one): the wider radii
-    // grow no blobs off it.
-    size_t drawn = 0, off = 0, past = 0;
-    for (const Camera& c : cams) {
-      FrameResult fr;
-      ASSERT_TRUE(r.render(c, RenderSettings{}, fr, kReadDepth).isOk());
-      const std::vector<double> p = surfacePoints(c, fr.depth, Eigen::Vector3d::Zero());
-      for (size_t i = 0; i < p.size(); i += 3, ++drawn) {
-        const double x = std::clamp(p[i], -1.0, 1.0), y = std::clamp(p[i + 1], -1.0, 1.0);
-        off += std::abs(p[i + 2] - height(x, y)) > 0.005;
-        past += std::max(std::abs(p[i] - x), std::abs(p[i + 1] - y)) > (p[i] < 0 ? 0.01 : 0.04);
-      }
-    }
-    std::printf("sparse sheet (reach %.1f): of %zu drawn pixels %zu off the sheet, %zu past its fringe\n",
-                opt.sparseReach, drawn, off, past);
-    EXPECT_LE(double(off), 0.002 * double(drawn));
-    EXPECT_LE(double(past), 0.002 * double(drawn));
+    views[k] = sheetViews(pack, *mesh, cams, (hi - lo).norm(), height, k ? "sparse sheet, --sparse-reach 6" : "sparse sheet");
+    if (HasFatalFailure()) return;
+    // Nor surface far from every point in its own spacing (eval's '>3 loc').
+    const FarStats far = farOverOrbit(pack, 4, 512);
+    std::printf("sparse sheet (reach %.1f): beyond 3 spacings %.4f %%, beyond 3 local spacings %.4f %%\n",
+                opt.sparseReach, 100 * far.beyond3, 100 * far.beyond3Local);
+    EXPECT_LE(far.beyond3Local, 0.001);
   }
   EXPECT_LT(views[0].iouMin, 0.85);   // specks
   EXPECT_GE(views[1].iouMin, 0.97);   // surface
@@ -484,7 +498,8 @@ TEST(Accuracy, BunnyScansInChunksMatchOneChunk) {
 }
 
 // The reference-free measure (eval's "far"): every rendered surface pixel's distance to the
-// nearest input point, in sample spacings, over 8 orbit views about the pack's up axis.
+// nearest input point, in sample spacings (and in that point's own where it is wider), over
+// orbit views about the pack's up axis.
 FarStats farOverOrbit(const PackReader& pack, int views, int size) {
   EglContext ctx;
   EXPECT_TRUE(ctx.init().isOk());
@@ -493,21 +508,26 @@ FarStats farOverOrbit(const PackReader& pack, int views, int size) {
   SourcePoints src;
   EXPECT_TRUE(loadSourcePoints(pack, src).isOk());
   const NearestSamples samples(std::move(src.xyz));
+  const std::vector<float> area = samples.areaSpacings();
   Eigen::Vector3d lo, hi;
   const Eigen::Vector3d origin(pack.meta().origin);
   lo = origin + Eigen::Vector3d(pack.meta().boundsMin);
   hi = origin + Eigen::Vector3d(pack.meta().boundsMax);
-  std::vector<double> all;
+  std::vector<double> all, local;
   for (const Camera& cam : orbitCameras(lo, hi, views, pack.viewUp(), 40, size, size)) {
     FrameResult fr;
     EXPECT_TRUE(r.render(cam, RenderSettings{}, fr, kReadDepth).isOk());
     const std::vector<double> hits = surfacePoints(cam, fr.depth, origin);
     std::vector<double> d(hits.size() / 3);
-    samples.distances(hits.data(), d.size(), d.data());
-    for (double& x : d) x /= pack.meta().sampleSpacing;
+    std::vector<uint32_t> at(d.size());
+    samples.distances(hits.data(), d.size(), d.data(), at.data());
+    for (size_t i = 0; i < d.size(); ++i) {
+      d[i] /= pack.meta().sampleSpacing;
+      local.push_back(at[i] < area.size() ? std::max(1.0, area[at[i]] / pack.meta().sampleSpacing) : 1.0);
+    }
     all.insert(all.end(), d.begin(), d.end());
   }
-  return summarizeFar(all);
+  return summarizeFar(all, &local);
 }
 
 // Aerial lidar, a terrestrial scan and a stereo camera's organized PCD: surface where no point
@@ -533,6 +553,17 @@ TEST_P(FarReal, RenderedSurfaceLiesNearInputPoints) {
   EXPECT_GT(f.pixels, 10000u);
   EXPECT_LE(f.beyond3, 0.01);
   EXPECT_LE(f.beyond10, 0.001);
+  // --sparse-reach 6 draws sparse surface (autzen's river) past 3 of the pack's spacings, but
+  // not past 3 of the nearest point's own.
+  PackOptions reach;
+  reach.sparseReach = 6;
+  ASSERT_TRUE(packInput(*input, dir.file("r.hfa"), reach, nullptr, sum).isOk());
+  PackReader rp;
+  ASSERT_TRUE(rp.open(dir.file("r.hfa")).isOk());
+  const FarStats r = farOverOrbit(rp, 8, 512);
+  std::printf("%s, --sparse-reach 6: beyond 3 spacings %.4f %%, beyond 3 local spacings %.4f %% (default: %.4f %%)\n",
+              GetParam(), 100 * r.beyond3, 100 * r.beyond3Local, 100 * f.beyond3Local);
+  EXPECT_LE(r.beyond3Local, 0.001);
 }
 
 INSTANTIATE_TEST_SUITE_P(Scans, FarReal,
