@@ -55,6 +55,20 @@ PrecisionNote precisionNote(const std::string& note) {
   return p;
 }
 
+// The NOTE line "sparse-reach: R[ auto]" (only packs made with --sparse-reach have it).
+struct ReachNote {
+  double reach = 0;  // 0: none
+  bool chosen = false;  // auto
+};
+ReachNote reachNote(const std::string& note) {
+  ReachNote r;
+  std::istringstream in(note);
+  std::string line;
+  while (std::getline(in, line))
+    if (std::sscanf(line.c_str(), "sparse-reach: %lf", &r.reach) == 1) r.chosen = line.find(" auto") != std::string::npos;
+  return r;
+}
+
 std::string fmtNumber(double v) {
   char b[32];
   std::snprintf(b, sizeof b, "%g", v);
@@ -298,6 +312,10 @@ void printPackJson(const PackReader& pack, const PackSummary& sum) {
                 pn.degrees, pn.levels);
   else
     std::printf(", \"precision\": null");
+  if (const ReachNote rn = reachNote(pack.note()); rn.reach > 0)
+    std::printf(", \"sparse_reach\": {\"reach\": %.9g, \"auto\": %s}", rn.reach, rn.chosen ? "true" : "false");
+  else
+    std::printf(", \"sparse_reach\": null");
   std::printf(", \"pages_compressed\": %s, \"page_bytes\": {", pack.compressedPages() ? "true" : "false");
   first = true;
   for (const PageBytes& b : pageBytes(pack)) {
@@ -358,6 +376,9 @@ void printPackText(const PackReader& pack, const PackSummary& sum) {
     std::printf("detail    full: the texels are the data's (median %.4g: half each cell's area spacing, or --texel-size)\n",
                 sum.tn.wanted);
   std::printf("precision %s\n", precisionText(precisionNote(pack.note())).c_str());
+  if (const ReachNote rn = reachNote(pack.note()); rn.reach > 0)
+    std::printf("sparse    surface-like points reach up to %.3g sample spacings (--sparse-reach %s)\n", rn.reach,
+                rn.chosen ? "auto" : fmtNumber(rn.reach).c_str());
   std::printf("bytes     %.2f per source point\n", double(pack.fileBytes()) / double(std::max<uint64_t>(1, m.sourcePoints)));
   std::printf("pages    ");
   uint64_t stored = 0, raw = 0;

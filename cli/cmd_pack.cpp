@@ -55,13 +55,16 @@ const char* kHelp =
     "                         texel of it lies within R coverage radii of surface: the gaps a\n"
     "                         random scatter of points leaves, which look like pinholes from\n"
     "                         afar (default 2; 0 keeps every gap open, for small real holes)\n"
-    "  --sparse-reach R       point inputs: a point whose neighbours lie on a clean surface (not\n"
+    "  --sparse-reach R|auto  point inputs: a point whose neighbours lie on a clean surface (not\n"
     "                         loose returns such as foliage, not a scan's edge) lets its splat and\n"
     "                         coverage follow its own spacing up to R times the pack's, so a surface\n"
     "                         sampled much more sparsely than the rest (a terrestrial scan's far\n"
     "                         field, a strip flown higher, water) is drawn as surface instead of\n"
     "                         specks (default 1.5, the limit of every point, which leaves sparse\n"
     "                         water returns open; 6 covers regions 16x sparser; at most 16).\n"
+    "                         auto: R is the median spacing of the surface-like points sampled\n"
+    "                         over 3 of the pack's spacings apart (1.5 when there are none); the\n"
+    "                         summary and 'info' say what it chose.\n"
     "                         The surface test is the smoothing fit's: not with --no-smooth on\n"
     "                         files with normals\n"
     "  --splat R              point inputs: each point spreads over R sample spacings with a\n"
@@ -218,10 +221,12 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
     if (*v <= 0 || *v > 100) return (Status::badInput("--coverage must be in (0, 100]"));
     opt.coverageRadius = *v;
   }
-  if (a.has("sparse-reach")) {
+  if (a.has("sparse-reach") && a.get("sparse-reach") == "auto") {
+    opt.sparseReachAuto = true;
+  } else if (a.has("sparse-reach")) {
     auto v = parseNumber("sparse-reach", a.get("sparse-reach"));
-    if (!v) return v.status();
-    if (*v < 1.5 || *v > 16) return (Status::badInput("--sparse-reach must be in [1.5, 16]"));
+    if (!v || *v < 1.5 || *v > kMaxSparseReach)
+      return Status::badInput("--sparse-reach must be 'auto' or a number in [1.5, 16], not '" + a.get("sparse-reach") + "'");
     opt.sparseReach = *v;
   }
   if (a.has("fill-gaps")) {
@@ -284,7 +289,9 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
 }
 
 // The summary: JSON on stdout, or text on stderr.
-static void printSummary(const std::string& out, const PackSummary& sum, bool json) {
+static void printSummary(const std::string& out, const PackSummary& sum, const PackOptions& opt, bool json) {
+  const bool autoReach = opt.sparseReachAuto,
+             reachGiven = sum.sparseReach > 0 && (autoReach || opt.sparseReach != PackOptions{}.sparseReach);
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
   const unsigned cores = sum.threads ? sum.threads : std::max(1u, std::thread::hardware_concurrency());
   // MPI ranks poll while they wait for each other: their waits count as busy.
@@ -301,7 +308,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                 "\"texels\": %llu, \"texel_size\": %.9g, \"texel_min\": %.9g, \"texel_max\": %.9g, \"sample_spacing\": %.9g, \"area_spacing\": %.9g, \"up\": [%.9g, %.9g, %.9g], "
                 "\"up_source\": \"%s\", \"bytes\": %llu, "
                 "\"bytes_per_point\": %.3f, \"scratch_bytes\": %llu, \"scratch_raw_bytes\": %llu, \"scratch_coded_bytes\": %llu, \"up_to_date\": %s, \"normals_estimated\": %s, \"from_triangles\": %s, \"color\": %s, "
-                "\"cells_per_level\": [",
+                "\"sparse_reach\": %.9g, \"sparse_surface_share\": %.9g, \"cells_per_level\": [",
                 jsonEscape(out).c_str(), (unsigned long long)sum.pointsRead, (unsigned long long)sum.pointsSkipped,
                 (unsigned long long)sum.triangles, sum.cells, sum.forcedCells, sum.degenerateCells, sum.layeredCells,
                 (unsigned long long)sum.outliersRemoved, (unsigned long long)sum.surfaceSamples, sum.chunks, sum.chunksHeld, sum.pages, sum.pageWidth, sum.pageHeight,
@@ -310,7 +317,7 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                 (unsigned long long)sum.fileBytes, double(sum.fileBytes) / double(std::max<uint64_t>(1, sum.pointsRead)),
                 (unsigned long long)sum.scratchBytes, (unsigned long long)sum.scratchRawBytes,
                 (unsigned long long)sum.codedScratchBytes, sum.upToDate ? "true" : "false", sum.normalsEstimated ? "true" : "false", sum.fromTriangles ? "true" : "false",
-                sum.hasColor ? "true" : "false");
+                sum.hasColor ? "true" : "false", sum.sparseReach, sum.sparseSurfaceShare);
     for (size_t i = 0; i < sum.cellsPerLevel.size(); ++i) std::printf("%s%u", i ? ", " : "", sum.cellsPerLevel[i]);
     std::printf("], \"seconds\": {\"count\": %.3f, \"distribute\": %.3f, \"octree\": %.3f, \"heightmaps\": %.3f, "
                 "\"write\": %.3f, \"total\": %.3f}, ",
@@ -341,6 +348,11 @@ static void printSummary(const std::string& out, const PackSummary& sum, bool js
                  sum.codedScratchBytes / 1048576.0, sum.seconds[5], sum.seconds[0],
                  sum.seconds[1], sum.seconds[2], sum.seconds[3], sum.seconds[4], mpts, busy(5),
                  cores, ranks.c_str(), busy(0), busy(1), busy(2), busy(3), busy(4));
+    if (reachGiven && sum.sparseSurfaceShare > 0)
+      std::fprintf(stderr, "  sparse reach %.3g (%s%.2g %% of the points on surfaces sampled over 3 sample spacings apart)\n",
+                   sum.sparseReach, autoReach ? "auto: the median spacing of the " : "", 100 * sum.sparseSurfaceShare);
+    else if (reachGiven)
+      std::fprintf(stderr, "  sparse reach %.3g (no points on surfaces sampled over 3 sample spacings apart)\n", sum.sparseReach);
   }
 }
 
@@ -404,7 +416,7 @@ int cmdPack(int argc, char** argv) {
   if (!s) return reportError(s);
   for (size_t i = input->warnings().size(); i < sum.warnings.size(); ++i)
     if (!quiet) std::fprintf(stderr, "scanatlas: warning: %s\n", sum.warnings[i].c_str());
-  if (a.flag("json") || !quiet) printSummary(out, sum, a.flag("json"));
+  if (a.flag("json") || !quiet) printSummary(out, sum, opt, a.flag("json"));
   return 0;
 }
 

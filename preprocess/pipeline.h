@@ -26,6 +26,9 @@ namespace sa {
 inline constexpr double kPointHeightStep = 1.0 / 16, kMeshHeightStep = 0;
 inline constexpr double kPointNormalTolerance = 1.5, kMeshNormalTolerance = 0;
 
+// The widest --sparse-reach (PackOptions::sparseReach), in the pack's sample spacings.
+inline constexpr double kMaxSparseReach = 16;
+
 struct PackOptions {
   uint64_t memBudget = uint64_t(1) << 30;     // bytes
   uint64_t texelBudget = 0;       // at most this many texels over all tiles (0: kMaxTexelsPerPoint per point)
@@ -36,6 +39,8 @@ struct PackOptions {
   // sample's splat and coverage radii may follow its own spacing (--sparse-reach; 1.5: as far as
   // every other sample's, which leaves surfaces sampled much more sparsely than the pack as speckle).
   double sparseReach = 1.5;
+  // --sparse-reach auto: the reach from the data (pipeline.cpp, autoSparseReach), in place of sparseReach.
+  bool sparseReachAuto = false;
   double gapReach = 2;            // in coverage radii: gaps inside a tile whose every texel is this near surface close
   double splatRadius = 1.5;       // in sample spacings: the point splat kernel (tangent planes)
   double outlierRatio = 3;        // local outlier test of point inputs (0: keep every point)
@@ -91,6 +96,9 @@ struct PackSummary {
   bool upToDate = false;  // the output already held this pack (same input hash): nothing done
   uint64_t inputHash = 0;
   double hashSeconds = 0;  // options, sizes, mesh files (the points are hashed as they are counted)
+  // Point inputs: the --sparse-reach the pack used (the option's, or what auto chose), and the
+  // share of the points that lie on surfaces sampled over kSpeckleScale pack spacings apart.
+  double sparseReach = 0, sparseSurfaceShare = 0;
   std::vector<std::string> warnings;
 };
 

@@ -797,25 +797,43 @@ TEST(Cli, ZstdLevelChangesTheBytesNotThePages) {
 }
 
 // autzen's river returns lie over 3 sample spacings apart: the pack says they show as specks and
-// names --sparse-reach; with it the warning goes, the pack differs, and a default pack of the
-// same input is not taken as up to date. Out-of-range values are refused, nothing written.
+// names --sparse-reach auto with the reach it would choose; with it the warning goes, the summary
+// and 'info' say what it chose, the pack differs, and a default pack of the same input is not
+// taken as up to date. A number given is reported as given; bad values are refused, nothing written.
 TEST(Cli, SparseReachIsSuggestedChangesThePackAndIsChecked) {
   test::TempDir d;
   const std::string las = test::sharedData("lidar/autzen_trim.las");
   CmdResult dflt = runErr("pack " + las + " -o " + d.file("a.hfa"), d.file("err.txt"));
   ASSERT_EQ(dflt.code, 0) << dflt.err;
-  EXPECT_NE(dflt.err.find("--sparse-reach 6"), std::string::npos) << dflt.err;
-  CmdResult reach = runErr("pack " + las + " -o " + d.file("a.hfa") + " --sparse-reach 6", d.file("err.txt"));
+  const size_t hint = dflt.err.find("--sparse-reach auto (here ");
+  ASSERT_NE(hint, std::string::npos) << dflt.err;
+  const double suggested = std::atof(dflt.err.c_str() + hint + 26);
+  EXPECT_GT(suggested, 3.0);
+  EXPECT_LE(suggested, 16.0);
+  CmdResult reach = runErr("pack " + las + " -o " + d.file("a.hfa") + " --sparse-reach auto", d.file("err.txt"));
   ASSERT_EQ(reach.code, 0) << reach.err;
   EXPECT_EQ(reach.err.find("up to date"), std::string::npos) << reach.err;
-  EXPECT_EQ(reach.err.find("--sparse-reach 6"), std::string::npos) << reach.err;
+  EXPECT_EQ(reach.err.find("scattered specks"), std::string::npos) << reach.err;
+  const size_t said = reach.err.find("sparse reach ");
+  ASSERT_NE(said, std::string::npos) << reach.err;
+  EXPECT_NEAR(std::atof(reach.err.c_str() + said + 13), suggested, 0.051) << reach.err;
+  EXPECT_NE(reach.err.find("(auto: the median spacing"), std::string::npos) << reach.err;
+  const CmdResult info = run("info " + d.file("a.hfa"));
+  EXPECT_NE(info.out.find("sample spacings (--sparse-reach auto)"), std::string::npos) << info.out;
+  EXPECT_NE(run("info " + d.file("a.hfa") + " --json").out.find("\"sparse_reach\": {\"reach\": "), std::string::npos);
   ASSERT_EQ(run("pack " + las + " -o " + d.file("b.hfa") + " -q").code, 0);
   EXPECT_NE(bytesOf(d.file("a.hfa")), bytesOf(d.file("b.hfa")));
+  EXPECT_EQ(run("info " + d.file("b.hfa")).out.find("sparse "), std::string::npos);
+  EXPECT_NE(run("info " + d.file("b.hfa") + " --json").out.find("\"sparse_reach\": null"), std::string::npos);
   EXPECT_EQ(run("verify " + d.file("a.hfa")).code, 0);
-  for (const char* bad : {"1", "16.5", "wide"}) {
+  const CmdResult six = runErr("pack " + las + " -o " + d.file("c.hfa") + " --sparse-reach 6", d.file("err.txt"));
+  ASSERT_EQ(six.code, 0) << six.err;
+  EXPECT_NE(six.err.find("sparse reach 6 ("), std::string::npos) << six.err;
+  EXPECT_NE(run("info " + d.file("c.hfa")).out.find("up to 6 sample spacings (--sparse-reach 6)"), std::string::npos);
+  for (const char* bad : {"1", "16.5", "wide", "Auto"}) {
     const CmdResult r = runErr("pack " + las + " -o " + d.file("bad.hfa") + " --sparse-reach " + bad, d.file("err.txt"));
     EXPECT_EQ(r.code, 2) << bad;
-    EXPECT_NE(r.err.find("--sparse-reach"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("--sparse-reach must be 'auto' or"), std::string::npos) << r.err;
     EXPECT_FALSE(std::filesystem::exists(d.file("bad.hfa"))) << bad;
   }
 }

@@ -335,8 +335,9 @@ MeshViews sheetViews(const PackReader& pack, const TriangleMesh& mesh, const std
 
 // A sheet whose right half is sampled 16x more sparsely than its left (a terrestrial scan's far
 // field, a second strip flown higher): by default the sparse half's samples keep radii near
-// the pack's spacing and it renders as specks, and the pack says so; with --sparse-reach 6 its
-// surface-like samples' radii follow their spacing and it renders as surface, on the sheet.
+// the pack's spacing and it renders as specks, and the pack says so; with --sparse-reach auto its
+// surface-like samples' radii follow their spacing up to the reach it chose from them, and it
+// renders as surface, on the sheet.
 TEST(Accuracy, SparseHalfOfASheetIsSurfaceWithSparseReach) {
   test::TempDir dir;
   auto height = [](double x, double y) { return 0.05 * std::sin(3 * x) * std::cos(2 * y); };
@@ -375,25 +376,40 @@ TEST(Accuracy, SparseHalfOfASheetIsSurfaceWithSparseReach) {
   const Eigen::Vector3d lo(-1, -1, -0.05), hi(1, 1, 0.05);
   const std::vector<Camera> cams = orbitCameras(lo, hi, 4, Eigen::Vector3d::UnitZ(), 40, 512, 512);
   MeshViews views[2];
+  double suggested = 0;
   for (int k = 0; k < 2; ++k) {
     PackOptions opt;
     opt.up = Eigen::Vector3d::UnitZ();
-    opt.sparseReach = k ? 6 : 1.5;
+    opt.sparseReachAuto = k == 1;
     PackSummary sum;
     const std::string path = dir.file(k ? "reach.hfa" : "default.hfa");
     ASSERT_TRUE(packInput(*input, path, opt, nullptr, sum).isOk());
-    // The default names the sparse half (5000 of 85000 points) and the option that covers it.
-    const bool warned = std::any_of(sum.warnings.begin(), sum.warnings.end(),
-                                    [](const std::string& w) { return w.find("--sparse-reach") != std::string::npos; });
-    EXPECT_EQ(warned, k == 0);
+    // Both count the sparse half (5000 of 85000 points, 5.9 %, less its edge) as surfaces sampled
+    // over 3 spacings apart. The default names the option that covers it and the reach auto
+    // chooses; auto chooses the sparse half's median spacing in the pack's: its points are 4x as
+    // far apart, and an area spacing is wider than the nearest neighbour's.
+    EXPECT_GT(sum.sparseSurfaceShare, 0.04);
+    EXPECT_LT(sum.sparseSurfaceShare, 0.062);
+    const auto warning = std::find_if(sum.warnings.begin(), sum.warnings.end(), [](const std::string& w) {
+      return w.find("--sparse-reach auto (here ") != std::string::npos;
+    });
+    EXPECT_EQ(warning != sum.warnings.end(), k == 0);
+    if (k == 0 && warning != sum.warnings.end())
+      suggested = std::atof(warning->c_str() + warning->find("(here ") + 6);
+    if (k == 1) {
+      std::printf("sparse sheet: --sparse-reach auto chose %.3f (suggested %.1f)\n", sum.sparseReach, suggested);
+      EXPECT_GE(sum.sparseReach, 5.0);
+      EXPECT_LE(sum.sparseReach, 9.0);
+      EXPECT_NEAR(sum.sparseReach, suggested, 0.051);
+    }
     PackReader pack;
     ASSERT_TRUE(pack.open(path).isOk());
-    views[k] = sheetViews(pack, *mesh, cams, (hi - lo).norm(), height, k ? "sparse sheet, --sparse-reach 6" : "sparse sheet");
+    views[k] = sheetViews(pack, *mesh, cams, (hi - lo).norm(), height, k ? "sparse sheet, --sparse-reach auto" : "sparse sheet");
     if (HasFatalFailure()) return;
     // Nor surface far from every point in its own spacing (eval's '>3 loc').
     const FarStats far = farOverOrbit(pack, 4, 512);
-    std::printf("sparse sheet (reach %.1f): beyond 3 spacings %.4f %%, beyond 3 local spacings %.4f %%\n",
-                opt.sparseReach, 100 * far.beyond3, 100 * far.beyond3Local);
+    std::printf("sparse sheet (reach %.2f): beyond 3 spacings %.4f %%, beyond 3 local spacings %.4f %%\n",
+                sum.sparseReach, 100 * far.beyond3, 100 * far.beyond3Local);
     EXPECT_LE(far.beyond3Local, 0.001);
   }
   EXPECT_LT(views[0].iouMin, 0.85);   // specks
@@ -553,16 +569,17 @@ TEST_P(FarReal, RenderedSurfaceLiesNearInputPoints) {
   EXPECT_GT(f.pixels, 10000u);
   EXPECT_LE(f.beyond3, 0.01);
   EXPECT_LE(f.beyond10, 0.001);
-  // --sparse-reach 6 draws sparse surface (autzen's river) past 3 of the pack's spacings, but
+  // --sparse-reach auto draws sparse surface (autzen's river) past 3 of the pack's spacings, but
   // not past 3 of the nearest point's own.
   PackOptions reach;
-  reach.sparseReach = 6;
+  reach.sparseReachAuto = true;
   ASSERT_TRUE(packInput(*input, dir.file("r.hfa"), reach, nullptr, sum).isOk());
   PackReader rp;
   ASSERT_TRUE(rp.open(dir.file("r.hfa")).isOk());
   const FarStats r = farOverOrbit(rp, 8, 512);
-  std::printf("%s, --sparse-reach 6: beyond 3 spacings %.4f %%, beyond 3 local spacings %.4f %% (default: %.4f %%)\n",
-              GetParam(), 100 * r.beyond3, 100 * r.beyond3Local, 100 * f.beyond3Local);
+  std::printf("%s, --sparse-reach auto (%.2f): beyond 3 spacings %.4f %%, beyond 3 local spacings %.4f %% (default: %.4f %%)\n",
+              GetParam(), sum.sparseReach, 100 * r.beyond3, 100 * r.beyond3Local, 100 * f.beyond3Local);
+  EXPECT_GT(sum.sparseReach, 1.5);
   EXPECT_LE(r.beyond3Local, 0.001);
 }
 
