@@ -928,13 +928,18 @@ SparseSurfaces sparseSurfaces(const PackJob& job) {
 // The --sparse-reach this pack uses (the option's, or what auto chooses), and the warning when
 // over 1 % of the points lie on surfaces that the default draws as speckle.
 void resolveSparseReach(PackJob& job) {
+  const bool given = job.opt.sparseReachAuto || job.opt.sparseReach != PackOptions{}.sparseReach;
   if (job.triangles) {
     job.sparseReach = job.opt.sparseReach;
+    if (given) job.sum.warnings.push_back("--sparse-reach does nothing here: mesh faces are rasterized (it is for point inputs)");
     return;
   }
   const SparseSurfaces sp = sparseSurfaces(job);
   job.sparseReach = job.sum.sparseReach = job.opt.sparseReachAuto ? sp.reach : job.opt.sparseReach;
   job.sum.sparseSurfaceShare = sp.share;
+  if (given && !job.opt.smooth && job.fileNormals)
+    job.sum.warnings.push_back("--sparse-reach does nothing here: the surface test is the smoothing fit's, which "
+                               "--no-smooth skips on files with normals");
   if (job.opt.sparseReachAuto || job.opt.sparseReach > kMaxScale || sp.share <= 0.01) return;
   char warn[320];
   std::snprintf(warn, sizeof warn,
@@ -1058,7 +1063,7 @@ std::string makeNote(const PackJob& job) {
   std::snprintf(precision, sizeof precision, "precision: height-step %.9g normal-tolerance %.9g colour-tolerance %d\n",
                 p.heightStep, p.normalTolerance, p.colourTolerance);
   note += precision;
-  if (job.opt.sparseReachAuto || job.opt.sparseReach != PackOptions{}.sparseReach) {  // only when given: packs stay as they were
+  if (!job.triangles && (job.opt.sparseReachAuto || job.opt.sparseReach != PackOptions{}.sparseReach)) {  // only when given
     char reach[96];
     std::snprintf(reach, sizeof reach, "sparse-reach: %.9g%s\n", job.sparseReach, job.opt.sparseReachAuto ? " auto" : "");
     note += reach;

@@ -799,7 +799,8 @@ TEST(Cli, ZstdLevelChangesTheBytesNotThePages) {
 // autzen's river returns lie over 3 sample spacings apart: the pack says they show as specks and
 // names --sparse-reach auto with the reach it would choose; with it the warning goes, the summary
 // and 'info' say what it chose, the pack differs, and a default pack of the same input is not
-// taken as up to date. A number given is reported as given; bad values are refused, nothing written.
+// taken as up to date. A number given is reported as given; a mesh, or a file with normals under
+// --no-smooth, gets a warning that it does nothing; bad values are refused, nothing written.
 TEST(Cli, SparseReachIsSuggestedChangesThePackAndIsChecked) {
   test::TempDir d;
   const std::string las = test::sharedData("lidar/autzen_trim.las");
@@ -830,6 +831,20 @@ TEST(Cli, SparseReachIsSuggestedChangesThePackAndIsChecked) {
   ASSERT_EQ(six.code, 0) << six.err;
   EXPECT_NE(six.err.find("sparse reach 6 ("), std::string::npos) << six.err;
   EXPECT_NE(run("info " + d.file("c.hfa")).out.find("up to 6 sample spacings (--sparse-reach 6)"), std::string::npos);
+  // Where it can do nothing, it says so: a mesh, and a file with normals under --no-smooth.
+  const CmdResult mesh = runErr("pack " + test::sharedData("stanford_bunny/reconstruction/bun_zipper_res4.ply") + " -o " +
+                                    d.file("m.hfa") + " --sparse-reach auto", d.file("err.txt"));
+  ASSERT_EQ(mesh.code, 0) << mesh.err;
+  EXPECT_NE(mesh.err.find("--sparse-reach does nothing here: mesh faces"), std::string::npos) << mesh.err;
+  EXPECT_EQ(run("info " + d.file("m.hfa")).out.find("sparse "), std::string::npos);
+  std::string plane = "ply\nformat ascii 1.0\nelement vertex 2500\nproperty float x\nproperty float y\nproperty float z\n"
+                      "property float nx\nproperty float ny\nproperty float nz\nend_header\n";
+  for (int i = 0; i < 2500; ++i) plane += std::to_string(i % 50) + " " + std::to_string(i / 50) + " 0 0 0 1\n";
+  test::writeText(d.file("plane.ply"), plane);
+  const CmdResult rough = runErr("pack " + d.file("plane.ply") + " -o " + d.file("n.hfa") + " --no-smooth --sparse-reach 6",
+                                 d.file("err.txt"));
+  ASSERT_EQ(rough.code, 0) << rough.err;
+  EXPECT_NE(rough.err.find("--no-smooth skips on files with normals"), std::string::npos) << rough.err;
   for (const char* bad : {"1", "16.5", "wide", "Auto"}) {
     const CmdResult r = runErr("pack " + las + " -o " + d.file("bad.hfa") + " --sparse-reach " + bad, d.file("err.txt"));
     EXPECT_EQ(r.code, 2) << bad;
