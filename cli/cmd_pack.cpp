@@ -290,8 +290,7 @@ static Status parsePackOptions(const Args& a, PackOptions& opt) {
 
 // The summary: JSON on stdout, or text on stderr.
 static void printSummary(const std::string& out, const PackSummary& sum, const PackOptions& opt, bool json) {
-  const bool autoReach = opt.sparseReachAuto,
-             reachGiven = sum.sparseReach > 0 && (autoReach || opt.sparseReach != PackOptions{}.sparseReach);
+  const bool autoReach = opt.sparseReachAuto, reachGiven = sum.sparseReach > 0 && opt.sparseReachGiven();
   const double mpts = sum.seconds[5] > 0 ? sum.pointsRead / sum.seconds[5] / 1e6 : 0;
   const unsigned cores = sum.threads ? sum.threads : std::max(1u, std::thread::hardware_concurrency());
   // MPI ranks poll while they wait for each other: their waits count as busy.

@@ -907,8 +907,9 @@ SparseSurfaces sparseSurfaces(const PackJob& job) {
     const double toPack = kReachBinFloor * job.chunkSpacing[ci] / job.sum.spacing;
     for (int b = 0; b < kReachBins; ++b) {
       const uint64_t n = job.chunkSurfaceSpacings[ci][size_t(b)];
-      if (n == 0 || !(toPack * std::exp2(double(b) / kReachBinsPerOctave) >= kSpeckleScale * (1 - 1e-9))) continue;
-      q.emplace_back(toPack * std::exp2(double(b) / kReachBinsPerOctave), n);
+      const double lower = toPack * std::exp2(double(b) / kReachBinsPerOctave);
+      if (n == 0 || !(lower >= kSpeckleScale * (1 - 1e-9))) continue;
+      q.emplace_back(lower, n);
       out.points += n;
     }
   }
@@ -928,7 +929,7 @@ SparseSurfaces sparseSurfaces(const PackJob& job) {
 // The --sparse-reach this pack uses (the option's, or what auto chooses), and the warning when
 // over 1 % of the points lie on surfaces that the default draws as speckle.
 void resolveSparseReach(PackJob& job) {
-  const bool given = job.opt.sparseReachAuto || job.opt.sparseReach != PackOptions{}.sparseReach;
+  const bool given = job.opt.sparseReachGiven();
   if (job.triangles) {
     job.sparseReach = job.opt.sparseReach;
     if (given) job.sum.warnings.push_back("--sparse-reach does nothing here: mesh faces are rasterized (it is for point inputs)");
@@ -1063,7 +1064,7 @@ std::string makeNote(const PackJob& job) {
   std::snprintf(precision, sizeof precision, "precision: height-step %.9g normal-tolerance %.9g colour-tolerance %d\n",
                 p.heightStep, p.normalTolerance, p.colourTolerance);
   note += precision;
-  if (!job.triangles && (job.opt.sparseReachAuto || job.opt.sparseReach != PackOptions{}.sparseReach)) {  // only when given
+  if (!job.triangles && job.opt.sparseReachGiven()) {  // only when given
     char reach[96];
     std::snprintf(reach, sizeof reach, "sparse-reach: %.9g%s\n", job.sparseReach, job.opt.sparseReachAuto ? " auto" : "");
     note += reach;

@@ -41,6 +41,8 @@ struct PackOptions {
   double sparseReach = 1.5;
   // --sparse-reach auto: the reach from the data (pipeline.cpp, autoSparseReach), in place of sparseReach.
   bool sparseReachAuto = false;
+  // --sparse-reach was given (auto or a reach other than the default).
+  bool sparseReachGiven() const { return sparseReachAuto || sparseReach != PackOptions{}.sparseReach; }
   double gapReach = 2;            // in coverage radii: gaps inside a tile whose every texel is this near surface close
   double splatRadius = 1.5;       // in sample spacings: the point splat kernel (tangent planes)
   double outlierRatio = 3;        // local outlier test of point inputs (0: keep every point)
