@@ -648,18 +648,29 @@ Status PackReader::decodeCell(uint32_t i) const {
   return Status::ok();
 }
 
-// Decodes every cell's tile of a compressed section into `pages`, on all cores; the error of the
-// lowest failing cell.
-Status PackReader::decodePages(const char id[4], TexelLayout layout, uint8_t* pages) const {
+Status PackReader::decodeCells(std::span<const uint32_t> cells) const {
+  if (!onDemand_ || cells.empty()) return Status::ok();
+  for (uint32_t i : cells)
+    if (i >= meta_->cellCount) return Status::internal(path_ + ": decodeCells(" + std::to_string(i) + ") past the cells");
+  SA_RETURN_IF_ERROR(decodePages("HGTZ", kHeightTexels, hOwn_.data, cells));
+  if (nrml_) SA_RETURN_IF_ERROR(decodePages("NRMZ", kNormalTexels, nOwn_.data, cells));
+  if (colr_) SA_RETURN_IF_ERROR(decodePages("COLZ", kColorTexels, cOwn_.data, cells));
+  return Status::ok();
+}
+
+// Decodes the tiles of a compressed section into `pages`, on all cores: the cells listed, or
+// every cell; the error of the first failing one in that order.
+Status PackReader::decodePages(const char id[4], TexelLayout layout, uint8_t* pages, std::span<const uint32_t> cells) const {
   std::mutex mu;
   Status first = Status::ok();
-  uint32_t firstCell = UINT32_MAX;
-  parallelFor(meta_->cellCount, [&](size_t i) {
-    Status s = decodeTileOf(id, layout, pages, uint32_t(i));
+  size_t firstAt = SIZE_MAX;
+  const size_t n = cells.empty() ? meta_->cellCount : cells.size();
+  parallelFor(n, [&](size_t k) {
+    Status s = decodeTileOf(id, layout, pages, cells.empty() ? uint32_t(k) : cells[k]);
     if (s) return;
     std::lock_guard<std::mutex> lock(mu);
-    if (i < firstCell) {
-      firstCell = uint32_t(i);
+    if (k < firstAt) {
+      firstAt = k;
       first = s;
     }
   });

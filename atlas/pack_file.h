@@ -163,6 +163,9 @@ class PackReader {
   // tile's texels are zero. Thread-safe for different cells; a no-op when the pages are raw or
   // already decoded. An error names the file, the section and the cell.
   Status decodeCell(uint32_t i) const;
+  // decodeCell for each cell listed, on every core, a section at a time as open decodes a whole
+  // pack (about as fast a tile); the error of the first failing cell in the list.
+  Status decodeCells(std::span<const uint32_t> cells) const;
   // Cell i's tile with its gutter, (tileW + 2) x (tileH + 2) texels row-major, into the caller's
   // buffers (normals: kNormalBytes a texel, rgba: 4; either may be null and is then not written;
   // the pack's own channels only). Any PageLoad but kNone for compressed pages; thread-safe.
@@ -234,7 +237,7 @@ class PackReader {
   std::span<const uint8_t> tileBlob(const char id[4], uint32_t i) const;
   Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* out, uint32_t stride, TileRegion r, uint32_t i) const;
   Status decodeTileOf(const char id[4], TexelLayout layout, uint8_t* pages, uint32_t i) const;
-  Status decodePages(const char id[4], TexelLayout layout, uint8_t* pages) const;
+  Status decodePages(const char id[4], TexelLayout layout, uint8_t* pages, std::span<const uint32_t> cells = {}) const;
   std::string path_;
   const uint8_t* base_ = nullptr;
   uint64_t size_ = 0;

@@ -273,9 +273,10 @@ Status measureBudgetError(Renderer& budgeted, const std::string& packPath, const
                           RenderSettings rs, bool print, BudgetError& out) {
   rs.mode = budgeted.drawnMode(rs.mode);  // what the budget draws (exact and the others fall back to parallax)
   PackReader whole;
-  SA_RETURN_IF_ERROR(whole.open(packPath));
+  SA_RETURN_IF_ERROR(whole.open(packPath, PageLoad::kOnDemand));
   Renderer full;
-  SA_RETURN_IF_ERROR(full.init(whole));
+  SA_RETURN_IF_ERROR(full.init(whole, whole.onDemand(), 0, Renderer::Streaming::kVisible));
+  SA_RETURN_IF_ERROR(loadViewTiles(full, cams, rs));
   const double texel = whole.meta().texelSize;
   FrameResult a, b;
   for (size_t v = 0; v < cams.size(); ++v) {
@@ -438,7 +439,9 @@ int cmdBench(int argc, char** argv) {
   if (!budgetArg) return reportError(budgetArg.status());
   GpuBudget budget = *budgetArg;
   PackReader pack;
-  s = pack.open(a.positionals()[0], budget.bytes ? PageLoad::kTiles : a.flag("stream") ? PageLoad::kOnDemand : PageLoad::kAll);
+  // Without a budget or --stream, the tiles the cameras draw are decoded before the first frame
+  // (loadViewTiles), the others never.
+  s = pack.open(a.positionals()[0], budget.bytes ? PageLoad::kTiles : PageLoad::kOnDemand);
   if (!s) return reportError(s);
   StreamReport streamed;
   streamed.openMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -473,8 +476,11 @@ int cmdBench(int argc, char** argv) {
     return reportError(Status::badInput("bench: --budget-error compares a --gpu-budget render with the unlimited one: give --gpu-budget"));
   const bool stream = a.flag("stream") || budget.bytes > 0;
   Renderer renderer;
-  s = renderer.init(pack, stream, budget.bytes);
+  s = renderer.init(pack, stream || pack.onDemand(), budget.bytes,
+                    stream ? Renderer::Streaming::kWholePack : Renderer::Streaming::kVisible);
   if (!s) return reportError(s);
+  for (size_t i = 0; i < configs.size() && !stream; ++i)
+    if (s = loadViewTiles(renderer, cams, configs[i].settings); !s) return reportError(s);
   streamed.initMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   if (a.flag("stream")) {
     s = streamFirstView(renderer, cams[0], configs[0].settings, t0, streamed);

@@ -489,7 +489,7 @@ Status writePlot(const std::string& text, const std::string& out) {
 
 int runEval(const Args& a) {
   PackReader pack;
-  Status s = pack.open(a.positionals()[0]);
+  Status s = pack.open(a.positionals()[0], PageLoad::kOnDemand);  // the tiles the views draw: loadViewTiles
   if (!s) return reportError(s);
   Options o;
   s = parseOptions(a, pack, o);
@@ -520,8 +520,12 @@ int runEval(const Args& a) {
   s = ctx.init();
   if (!s) return reportError(s);
   Renderer renderer;
-  s = renderer.init(pack);
+  s = renderer.init(pack, pack.onDemand(), 0, Renderer::Streaming::kVisible);
   if (!s) return reportError(s);
+  RenderSettings surface = base;  // every surface mode draws the cells the views see
+  surface.mode = RenderMode::kParallax;
+  if (std::count(o.modes.begin(), o.modes.end(), RenderMode::kPoints) < long(o.modes.size()))
+    if (s = loadViewTiles(renderer, o.cams, surface); !s) return reportError(s);
   if (std::count(o.modes.begin(), o.modes.end(), RenderMode::kPoints) > 0) {
     s = renderer.setPoints(src.xyz, src.rgba, pack.meta().sampleSpacing);
     if (!s) return reportError(s);

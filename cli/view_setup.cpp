@@ -111,6 +111,11 @@ Status camerasFromArgs(const Args& a, const PackReader& pack, int defaultOrbit, 
   return Status::ok();
 }
 
+Status loadViewTiles(Renderer& r, const std::vector<Camera>& cams, const RenderSettings& s) {
+  for (const Camera& c : cams) SA_RETURN_IF_ERROR(r.loadVisibleTiles(c, s));
+  return Status::ok();
+}
+
 void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m) {
   if (m == RenderMode::kPoints || r.modeReady(m)) return;
   const ModeInfo& mi = modeInfo(m);

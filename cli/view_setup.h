@@ -24,6 +24,11 @@ Status modeSettingsFromArgs(const Args& a, RenderSettings& rs);
 // --opt with exactly `count` comma-separated numbers.
 Status numberList(const Args& a, const std::string& opt, size_t count, std::vector<double>& out);
 void packBounds(const PackReader& pack, Eigen::Vector3d& lo, Eigen::Vector3d& hi);
+// A renderer made with Renderer::Streaming::kVisible (a pack opened with PageLoad::kOnDemand,
+// no GPU budget): every tile these views draw in these settings decoded and uploaded, before
+// the first frame, so that a close-up of a large pack decodes only what it shows. The error of
+// a tile that fails to decode names the file and the cell.
+Status loadViewTiles(Renderer& r, const std::vector<Camera>& cams, const RenderSettings& s);
 // Says on stderr when the pack lacks what mode m needs (and what draws instead, and how to bake it).
 void warnIfModeFallsBack(const Renderer& r, const PackReader& pack, RenderMode m);
 

@@ -155,6 +155,8 @@ struct Renderer::Gl {
   std::vector<uint32_t> uploadQueue;
   std::vector<uint8_t> resident;
   uint32_t residentCount = 0;
+  bool visibleOnly = false;  // Streaming::kVisible: no streamer, loadVisibleTiles decodes
+  uint32_t lastMissing = 0;  // the visible cells the last frame lacked
   std::string streamError;
   // --gpu-budget: the tile cache's residency; per cell, its levels in memory (built by the
   // decoder from the level asked for, wantLevel, down; the finer ones dropped once a level is
@@ -221,7 +223,9 @@ double Renderer::nearPlane() const { return std::max((boundsMax_ - boundsMin_).n
 
 bool Renderer::tilesPending() const {
   if (!gl_) return false;
-  return gl_->residency ? !gl_->budgetSettled : gl_->streamer != nullptr;
+  if (gl_->residency) return !gl_->budgetSettled;
+  if (gl_->visibleOnly) return gl_->lastMissing > 0;
+  return gl_->streamer != nullptr;
 }
 
 uint32_t Renderer::tilesResident() const {
@@ -231,7 +235,7 @@ uint32_t Renderer::tilesResident() const {
     for (uint32_t i = 0; i < cellCount_; ++i) n += gl_->residency->residentFlags()[i];
     return n;
   }
-  return gl_->streamer ? gl_->residentCount : cellCount_;
+  return gl_->streamer || gl_->visibleOnly ? gl_->residentCount : cellCount_;
 }
 
 std::string Renderer::streamError() const {
@@ -242,7 +246,7 @@ std::string Renderer::streamError() const {
   return gl_ ? gl_->streamError : std::string();
 }
 
-Status Renderer::init(const PackReader& pack, bool streamPages, uint64_t gpuBudget) {
+Status Renderer::init(const PackReader& pack, bool streamPages, uint64_t gpuBudget, Streaming streaming) {
   gl_ = std::make_unique<Gl>();
   Gl& g = *gl_;
   const PackMeta& m = pack.meta();
@@ -321,7 +325,8 @@ Status Renderer::init(const PackReader& pack, bool streamPages, uint64_t gpuBudg
     g.pack = &pack;
     g.resident.assign(m.cellCount, 0);
     g.residentCount = 0;
-    g.streamer = std::make_unique<TileStreamer>(pack);
+    g.visibleOnly = streaming == Streaming::kVisible;
+    if (!g.visibleOnly) g.streamer = std::make_unique<TileStreamer>(pack);  // kVisible: loadVisibleTiles decodes
     return Status::ok();
   }
   if (pack.onDemand()) return Status::internal(pack.path() + ": pages opened on demand must be streamed");
@@ -737,9 +742,11 @@ void Renderer::uploadPages(const PackReader& pack) {
 // one tile), each with its gutter; when every cell is resident, streaming ends.
 void Renderer::uploadTiles(uint64_t budgetBytes) {
   Gl& g = *gl_;
-  if (!g.streamer || g.residency) return;  // --gpu-budget: planBudget uploads
-  const std::vector<uint32_t> fresh = g.streamer->takeDecoded();
-  g.uploadQueue.insert(g.uploadQueue.end(), fresh.begin(), fresh.end());
+  if (g.residency || !(g.streamer || g.visibleOnly)) return;  // --gpu-budget: planBudget uploads
+  if (g.streamer) {
+    const std::vector<uint32_t> fresh = g.streamer->takeDecoded();
+    g.uploadQueue.insert(g.uploadQueue.end(), fresh.begin(), fresh.end());
+  }
   const PackReader& pack = *g.pack;
   const uint32_t PW = pack.meta().pageWidth;
   const uint64_t texelBytes = 2 + (hasColor_ ? 4 : 0) + (hasNormals_ ? kNormalBytes : 0);
@@ -765,7 +772,7 @@ void Renderer::uploadTiles(uint64_t budgetBytes) {
   }
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
   g.uploadQueue.erase(g.uploadQueue.begin(), g.uploadQueue.begin() + ptrdiff_t(k));
-  if (g.residentCount == cellCount_ && g.streamer->done()) {
+  if (g.streamer && g.residentCount == cellCount_ && g.streamer->done()) {
     streamError();  // keep the decoder's error, if any, past its end
     g.streamer.reset();
     g.pack = nullptr;
@@ -775,9 +782,38 @@ void Renderer::uploadTiles(uint64_t budgetBytes) {
 
 void Renderer::waitForTiles() {
   Gl& g = *gl_;
+  if (g.visibleOnly) {  // the cells no view has loaded
+    std::vector<uint32_t> rest;
+    for (uint32_t i = 0; i < cellCount_; ++i)
+      if (!g.resident[i]) rest.push_back(i);
+    const Status s = g.pack->decodeCells(rest);
+    if (!s && g.streamError.empty()) g.streamError = s.message();
+    g.uploadQueue.insert(g.uploadQueue.end(), rest.begin(), rest.end());
+    uploadTiles(UINT64_MAX);
+    return;
+  }
   if (!g.streamer) return;
   g.streamer->waitAll();
   uploadTiles(UINT64_MAX);  // --gpu-budget: the frames upload what they plan
+}
+
+Status Renderer::loadVisibleTiles(const Camera& cam, const RenderSettings& s) {
+  Gl& g = *gl_;
+  if (g.streamer && !g.residency) {  // a whole pack streaming: made whole
+    waitForTiles();
+    const std::string e = streamError();
+    return e.empty() ? Status::ok() : Status::badInput(e);
+  }
+  if (!g.visibleOnly || s.mode == RenderMode::kPoints) return Status::ok();  // points draw no tile
+  SA_RETURN_IF_ERROR(cam.validate());
+  VisibleSet vis;
+  culler_->compute(cam, cam.eye - origin_, nearPlane(), cullOptions(s), vis);
+  // In cell order, as a whole pack decodes (the tiles lie in the pages about that way).
+  std::sort(vis.missing.begin(), vis.missing.end());
+  SA_RETURN_IF_ERROR(g.pack->decodeCells(vis.missing));
+  g.uploadQueue.insert(g.uploadQueue.end(), vis.missing.begin(), vis.missing.end());
+  uploadTiles(UINT64_MAX);
+  return Status::ok();
 }
 
 Status Renderer::setPoints(const std::vector<float>& xyz, const std::vector<uint8_t>& rgba, double spacing) {
@@ -871,11 +907,9 @@ Status Renderer::ensureTargets(int width, int height) {
   return Status::ok();
 }
 
-// Which boxes this frame draws (front faces, inside boxes, splats) and with how many steps,
-// uploaded into one buffer: each list starts at an offset the SSBO binding accepts.
-void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double np, const RenderSettings& s,
-                                VisibleSet& vis, FrameStats& st) {
-  Gl& g = *gl_;
+// The culler's options for these settings, with the cells whose tiles are resident.
+CullOptions Renderer::cullOptions(const RenderSettings& s) const {
+  const Gl& g = *gl_;
   CullOptions co = s.cull;
   co.clipBox = s.clip.box;
   co.clipLo = s.clip.lo - origin_;
@@ -884,10 +918,18 @@ void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel
   co.planePoint = s.clip.point - origin_;
   co.planeNormal = s.clip.normal.normalized();
   co.maxSteps = std::max(1, s.iterations);
-  co.cellResident = g.residency ? g.residency->residentFlags() : g.streamer ? g.resident.data() : nullptr;
+  co.cellResident = g.residency ? g.residency->residentFlags() : !g.resident.empty() ? g.resident.data() : nullptr;
   co.minSteps = std::min(co.minSteps, co.maxSteps);
   co.slicePixels = s.mode == RenderMode::kAuto ? s.autoPixels : 0;
-  culler_->compute(cam, camRel, np, co, vis);
+  return co;
+}
+
+// Which boxes this frame draws (front faces, inside boxes, splats) and with how many steps,
+// uploaded into one buffer: each list starts at an offset the SSBO binding accepts.
+void Renderer::uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double np, const RenderSettings& s,
+                                VisibleSet& vis, FrameStats& st) {
+  Gl& g = *gl_;
+  culler_->compute(cam, camRel, np, cullOptions(s), vis);
   st.submitted = vis.submitted;
   st.culled = vis.culled;
   st.drawn = static_cast<uint32_t>(vis.front.size() + vis.inside.size());
@@ -1245,6 +1287,7 @@ Status Renderer::prepareVisible(const Camera& cam, const RenderSettings& s, cons
   } else if (g.streamer) {
     g.streamer->want(vis.missing);  // the visible cells it lacks, nearest first
   }
+  g.lastMissing = uint32_t(vis.missing.size());
   if (s.countWork) glClearNamedBufferData(g.counterBuf, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, nullptr);
   return Status::ok();
 }

@@ -141,7 +141,13 @@ class Renderer {
   // cells not seen for longest are evicted. Tiles are decoded as the view asks for them and
   // memory holds only their levels on the GPU and coarser, so the pack is best opened with
   // PageLoad::kTiles (no page memory: packs larger than RAM). Draws parallax, slices, auto and points.
-  Status init(const PackReader& pack, bool streamPages = false, uint64_t gpuBudget = 0);
+  // streaming (streamPages without gpuBudget): kWholePack decodes every tile in the background,
+  // the visible cells first (a window); kVisible decodes only the tiles of the views given to
+  // loadVisibleTiles before they are rendered, so a close-up of a large pack decodes what it
+  // shows (a cell not loaded so is not drawn).
+  enum class Streaming { kWholePack, kVisible };
+  Status init(const PackReader& pack, bool streamPages = false, uint64_t gpuBudget = 0,
+              Streaming streaming = Streaming::kWholePack);
   // The modes a --gpu-budget renderer draws as themselves (the others fall back to parallax).
   static bool budgetMode(RenderMode m) {
     return m == RenderMode::kParallax || m == RenderMode::kSlices || m == RenderMode::kAuto || m == RenderMode::kPoints;
@@ -152,6 +158,10 @@ class Renderer {
   uint32_t tilesResident() const;  // cells whose tiles are on the GPU
   // Blocks until every tile is decoded, then uploads them all (a streamed render that must be whole).
   void waitForTiles();
+  // Streamed without a budget: decodes and uploads every tile this view draws (kWholePack: all
+  // of them), so that a render of it is the image of a whole upload; an error names the file and
+  // the tile that failed to decode. Nothing to do for a pack uploaded whole or under a budget.
+  Status loadVisibleTiles(const Camera& cam, const RenderSettings& s);
   // The first tile that failed to decode while streaming ("" when none): its cell never draws.
   std::string streamError() const;
   // The points baseline: positions relative to the pack origin (xyz floats), RGBA8 colours.
@@ -201,6 +211,7 @@ class Renderer {
   void dropLevels(uint32_t cell, uint32_t from);
   void uploadTiles(uint64_t budgetBytes);
   Status ensureTargets(int width, int height);
+  CullOptions cullOptions(const RenderSettings& s) const;
   void uploadVisibility(const Camera& cam, const Eigen::Vector3d& camRel, double nearPlane, const RenderSettings& s,
                         VisibleSet& vis, FrameStats& st);
   // render()'s steps: the visible set (with the budget's plan or the streamer's wants), the

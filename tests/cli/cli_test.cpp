@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "../common/pack_damage.h"
 #include "../common/test_util.h"
 #include "grooves/grooves.h"
 
@@ -871,6 +872,57 @@ TEST(Cli, InfoSaysWhenATexelCapLoweredTheResolution) {
   auto f = nlohmann::json::parse(run("info " + d.file("full.hfa") + " --json").out);
   EXPECT_TRUE(f["texel_capped_by"].is_null());
   EXPECT_DOUBLE_EQ(f["texel_size"].get<double>(), f["texel_wanted"].get<double>());
+}
+
+
+// render without --gpu-budget decodes the tiles its views draw, before it writes any image: a
+// close-up of autzen is the same image from a pack with a damaged tile it does not draw, and a
+// view that draws that tile fails, naming the file and the cell, and writes no image at all.
+TEST(Cli, RenderDecodesTheTilesItsViewsDrawBeforeWritingAny) {
+  test::TempDir d;
+  ASSERT_EQ(run("pack " + test::sharedData("lidar/autzen_trim.las") + " -o " + d.file("a.hfa") + " -q").code, 0);
+  PackReader pack;
+  ASSERT_TRUE(pack.open(d.file("a.hfa"), PageLoad::kNone).isOk());
+  const PackMeta& m = pack.meta();
+  const double dx = m.boundsMax[0] - m.boundsMin[0];
+  // A cell wholly in the far half along x (cell frames are relative to the pack origin).
+  uint32_t far = UINT32_MAX;
+  for (uint32_t i = 0; i < pack.cells().size() && far == UINT32_MAX; ++i) {
+    const CellRecord& c = pack.cells()[i];
+    double lowX = c.origin[0];
+    for (const double* axis : {c.u, c.v, c.w}) {
+      const int k = axis == c.u ? 0 : axis == c.v ? 2 : 4;
+      lowX += std::min(axis[0] * c.box[k], axis[0] * c.box[k + 1]);
+    }
+    if (lowX > m.boundsMin[0] + 0.6 * dx && c.tileW > 2) far = i;
+  }
+  ASSERT_NE(far, UINT32_MAX);
+  ASSERT_TRUE(test::damageHeightTile(d.file("a.hfa"), far, d.file("bad.hfa")));
+  // Straight down onto the near end along x, from a tenth of the extent above it.
+  const double x = m.origin[0] + m.boundsMin[0] + 0.1 * dx, y = m.origin[1] + (m.boundsMin[1] + m.boundsMax[1]) / 2;
+  const double z = m.origin[2] + (m.boundsMin[2] + m.boundsMax[2]) / 2;
+  char view[256];
+  std::snprintf(view, sizeof view, " --eye %.3f,%.3f,%.3f --target %.3f,%.3f,%.3f --up 0,1,0 --size 96x96 -q", x, y,
+                z + 0.1 * dx, x, y, z);
+  CmdResult good = run("render " + d.file("a.hfa") + " -o " + d.file("good.png") + view + " --json");
+  ASSERT_EQ(good.code, 0) << good.out;
+  auto j = nlohmann::json::parse(good.out);
+  EXPECT_EQ(j["tiles"].get<uint32_t>(), pack.cells().size());
+  EXPECT_GT(j["tiles_decoded"].get<uint32_t>(), 0u);
+  EXPECT_LT(j["tiles_decoded"].get<uint32_t>(), pack.cells().size() / 4) << "a close-up decodes what it draws";
+  CmdResult close = runErr("render " + d.file("bad.hfa") + " -o " + d.file("close.png") + view, d.file("close.err"));
+  ASSERT_EQ(close.code, 0) << close.err;
+  auto bytes = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  EXPECT_EQ(bytes(d.file("close.png")), bytes(d.file("good.png")));
+  CmdResult orbit = runErr("render " + d.file("bad.hfa") + " -o " + d.file("o.png") + " --orbit 2 --size 64x64", d.file("o.err"));
+  EXPECT_EQ(orbit.code, 2);
+  EXPECT_NE(orbit.err.find(d.file("bad.hfa")), std::string::npos) << orbit.err;
+  EXPECT_NE(orbit.err.find("tile of cell " + std::to_string(far)), std::string::npos) << orbit.err;
+  EXPECT_FALSE(std::filesystem::exists(d.file("o_0.png")));
+  EXPECT_FALSE(std::filesystem::exists(d.file("o_1.png")));
 }
 
 }  // namespace

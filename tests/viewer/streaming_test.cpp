@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "../common/pack_damage.h"
 #include "../common/render_util.h"
 #include "preprocess/pipeline.h"
 #include "viewer/eval.h"
@@ -308,6 +309,92 @@ TEST_F(StreamingTest, AStreamedPackEndsWithTheImageOfAWholeUpload) {
   EXPECT_FALSE(r2.tilesPending());
   ASSERT_TRUE(r2.render(cam, rset, fr, true).isOk());
   EXPECT_EQ(fr.color.rgba, full.color.rgba);
+}
+
+// Streaming::kVisible (render without a budget), on autzen: a close-up decodes only the tiles it
+// draws and gives the image of a whole upload, bit for bit; a view rendered before it is loaded
+// lacks cells, and once loaded is the whole image too; waitForTiles decodes the rest, into the
+// pages open decodes. A damaged tile fails the view that draws it, naming the file and the
+// cell, and not a view that does not.
+TEST_F(StreamingTest, AVisibleOnlyRenderDecodesWhatItDrawsAndDrawsTheWholeImage) {
+  test::TempDir d;
+  packAutzen(d);
+  PackReader whole, lazy;
+  ASSERT_TRUE(whole.open(d.file("a.hfa")).isOk());
+  ASSERT_TRUE(lazy.open(d.file("a.hfa"), PageLoad::kOnDemand).isOk());
+  Renderer rw, rv;
+  ASSERT_TRUE(rw.init(whole).isOk());
+  ASSERT_TRUE(rv.init(lazy, true, 0, Renderer::Streaming::kVisible).isOk());
+  EXPECT_EQ(rv.tilesResident(), 0u);
+  const uint32_t n = uint32_t(whole.cells().size());
+  const Eigen::Vector3d o(whole.meta().origin), lo = o + Eigen::Vector3d(whole.meta().boundsMin),
+      hi = o + Eigen::Vector3d(whole.meta().boundsMax);
+  auto view = [&](double fx, double fy, double distance) {
+    Camera c;
+    c.target = lo + (hi - lo).cwiseProduct(Eigen::Vector3d(fx, fy, 0.3));
+    c.eye = c.target + Eigen::Vector3d(0.2, -0.3, 1).normalized() * distance * (hi - lo).norm();
+    c.up = Eigen::Vector3d::UnitZ();
+    c.width = c.height = 128;
+    return c;
+  };
+  const Camera close = view(0.4, 0.5, 0.08), far = view(0.5, 0.5, 1.2);
+  const RenderSettings rset;
+  auto sameImage = [&](const Camera& cam, const char* what) {
+    FrameResult a, b;
+    ASSERT_TRUE(rw.render(cam, rset, a, true).isOk());
+    ASSERT_TRUE(rv.render(cam, rset, b, true).isOk());
+    EXPECT_GT(a.cellsDrawn, 20u) << what;
+    EXPECT_EQ(b.stats.missing, 0u) << what;
+    EXPECT_FALSE(rv.tilesPending()) << what;
+    EXPECT_EQ(b.cellsDrawn, a.cellsDrawn) << what;
+    EXPECT_EQ(b.color.rgba, a.color.rgba) << what;
+    ASSERT_EQ(b.depth.size(), a.depth.size());
+    EXPECT_EQ(std::memcmp(b.depth.data(), a.depth.data(), a.depth.size() * sizeof(float)), 0) << what;
+  };
+  ASSERT_TRUE(rv.loadVisibleTiles(close, rset).isOk());
+  const uint32_t closeTiles = rv.tilesResident();
+  std::printf("autzen close-up: %u of %u tiles decoded\n", closeTiles, n);
+  EXPECT_GT(closeTiles, 20u);
+  EXPECT_LT(closeTiles, n / 3);
+  sameImage(close, "close-up");
+  FrameResult early;
+  ASSERT_TRUE(rv.render(far, rset, early, true).isOk());
+  EXPECT_GT(early.stats.missing, 100u) << "the far view's tiles were not loaded";
+  EXPECT_TRUE(rv.tilesPending());
+  ASSERT_TRUE(rv.loadVisibleTiles(far, rset).isOk());
+  EXPECT_GT(rv.tilesResident(), closeTiles);
+  sameImage(far, "far view");
+  rv.waitForTiles();
+  EXPECT_EQ(rv.tilesResident(), n);
+  EXPECT_EQ(rv.streamError(), "");
+  const uint64_t texels = whole.pageTexels();
+  for (uint32_t p = 0; p < whole.meta().pageCount; ++p) {
+    ASSERT_EQ(std::memcmp(lazy.heightPage(p), whole.heightPage(p), texels * 2), 0) << "page " << p;
+    ASSERT_EQ(std::memcmp(lazy.normalPage(p), whole.normalPage(p), texels * kNormalBytes), 0) << "page " << p;
+    ASSERT_EQ(std::memcmp(lazy.colorPage(p), whole.colorPage(p), texels * 4), 0) << "page " << p;
+  }
+  // A tile the far view draws and the close-up does not, damaged.
+  CellCuller culler(whole.cells());
+  VisibleSet vc, vf;
+  culler.compute(close, close.eye - o, rw.nearPlane(), CullOptions{}, vc);
+  culler.compute(far, far.eye - o, rw.nearPlane(), CullOptions{}, vf);
+  std::vector<uint8_t> inClose(n, 0);
+  for (const auto* l : {&vc.front, &vc.inside, &vc.splats})
+    for (const DrawItem& it : *l) inClose[it.cell] = 1;
+  uint32_t victim = n;
+  for (const DrawItem& it : vf.front)
+    if (!inClose[it.cell] && whole.cells()[it.cell].tileW > 2) victim = std::min(victim, it.cell);
+  ASSERT_LT(victim, n);
+  ASSERT_TRUE(test::damageHeightTile(d.file("a.hfa"), victim, d.file("damaged.hfa")));
+  PackReader damaged;
+  ASSERT_TRUE(damaged.open(d.file("damaged.hfa"), PageLoad::kOnDemand).isOk());
+  Renderer rd;
+  ASSERT_TRUE(rd.init(damaged, true, 0, Renderer::Streaming::kVisible).isOk());
+  EXPECT_TRUE(rd.loadVisibleTiles(close, rset).isOk()) << "the close-up does not draw cell " << victim;
+  const Status s = rd.loadVisibleTiles(far, rset);
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find(d.file("damaged.hfa")), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("HGTZ, tile of cell " + std::to_string(victim)), std::string::npos) << s.message();
 }
 
 // --gpu-budget a quarter of the atlas on the autzen LAS: the cache stays within it, each view
