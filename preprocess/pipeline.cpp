@@ -428,6 +428,39 @@ float medianSpacing(std::span<const ChunkPoint> sorted, uint32_t first, uint32_t
   return float(s[s.size() / 2] * chunkSpacing / 1024);
 }
 
+// The in-plane axes of a cell's tile: the plane fit's, or one of the cube's axes projected onto
+// the plane (v = w x u), whichever bounds the points in the smallest rectangle. The fit of a
+// flat patch has no preferred direction in its plane, and a tile turned 45 degrees from its
+// cube's footprint spends about half its texels outside it.
+void tileAxes(const OctreeCell& c, const std::vector<uint32_t>& idx, std::span<const double> pos, PlaneFit& f) {
+  if (f.degenerate || c.count < 3) return;
+  Eigen::Vector3d us[4] = {f.u}, vs[4] = {f.v};
+  int n = 1;
+  for (int a = 0; a < 3; ++a) {
+    const Eigen::Vector3d p = Eigen::Vector3d::Unit(a) - f.w[a] * f.w;
+    if (p.norm() < 0.5) continue;  // the axis is within 30 degrees of the normal
+    us[n] = p.normalized();
+    vs[n] = f.w.cross(us[n]);
+    ++n;
+  }
+  double lo[4][2], hi[4][2];
+  for (int k = 0; k < n; ++k) lo[k][0] = lo[k][1] = 1e300, hi[k][0] = hi[k][1] = -1e300;
+  for (uint32_t i = c.first; i < c.first + c.count; ++i) {
+    const Eigen::Vector3d d = vec(&pos[3 * size_t(idx[i])]) - f.centroid;
+    for (int k = 0; k < n; ++k) {
+      const double x = d.dot(us[k]), y = d.dot(vs[k]);
+      lo[k][0] = std::min(lo[k][0], x), hi[k][0] = std::max(hi[k][0], x);
+      lo[k][1] = std::min(lo[k][1], y), hi[k][1] = std::max(hi[k][1], y);
+    }
+  }
+  int best = 0;
+  auto area = [&](int k) { return (hi[k][0] - lo[k][0]) * (hi[k][1] - lo[k][1]); };
+  for (int k = 1; k < n; ++k)
+    if (area(k) < 0.95 * area(best)) best = k;  // the fit's own axes unless clearly larger
+  f.u = us[best];
+  f.v = vs[best];
+}
+
 // One of the octree's cells of chunk ci: its frame, its extent in that frame, its points.
 WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>& idx, std::span<const double> pos,
                   std::span<const ChunkPoint> sorted, double chunkSpacing) {
@@ -435,7 +468,8 @@ WorkCell workCell(uint32_t ci, const OctreeCell& c, const std::vector<uint32_t>&
   wc.chunk = ci;
   wc.first = c.first;
   wc.count = c.count;
-  const PlaneFit& f = c.fit;
+  PlaneFit f = c.fit;
+  tileAxes(c, idx, pos, f);
   for (int a = 0; a < 3; ++a) {
     wc.rec.origin[a] = f.centroid[a];
     wc.rec.u[a] = f.u[a];
