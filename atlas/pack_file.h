@@ -164,7 +164,7 @@ class PackReader {
   // already decoded. An error names the file, the section and the cell.
   Status decodeCell(uint32_t i) const;
   // decodeCell for each cell listed, on every core, a section at a time as open decodes a whole
-  // pack (about as fast a tile); the error of the first failing cell in the list.
+  // pack (so a tile costs what it costs there); the error of the first failing cell in the list.
   Status decodeCells(std::span<const uint32_t> cells) const;
   // Cell i's tile with its gutter, (tileW + 2) x (tileH + 2) texels row-major, into the caller's
   // buffers (normals: kNormalBytes a texel, rgba: 4; either may be null and is then not written;
